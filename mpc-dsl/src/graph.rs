@@ -67,8 +67,8 @@ impl Inner {
         if let Some(&id) = self.table.find(hash, |&id| nodes[id as usize] == node) {
             return id;
         }
-        let id = NodeId::try_from(self.nodes.len())
-            .expect("expression graph is limited to 2^32 nodes");
+        let id =
+            NodeId::try_from(self.nodes.len()).expect("expression graph is limited to 2^32 nodes");
         self.nodes.push(node);
         let (nodes, hasher) = (&self.nodes, &self.hasher);
         self.table

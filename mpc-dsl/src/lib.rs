@@ -25,6 +25,8 @@
 //! follow construction order and hashing never influences them, so the same model always
 //! lowers to the same program.
 
+#![forbid(unsafe_code)]
+
 pub mod ad;
 pub mod display;
 pub mod error;

@@ -366,7 +366,9 @@ impl<'g> Matrix<'g> {
     /// If `j` is out of range.
     pub fn col(&self, j: usize) -> Vector<'g> {
         assert!(j < self.cols, "column {j} of a {} matrix", self.shape_str());
-        (0..self.rows).map(|i| self.data[i * self.cols + j]).collect()
+        (0..self.rows)
+            .map(|i| self.data[i * self.cols + j])
+            .collect()
     }
 
     /// The transpose.
@@ -393,7 +395,11 @@ impl<'g> Matrix<'g> {
         if v.len() != self.cols {
             return Err(mismatch(
                 "matvec",
-                format!("a vector of length {} for a {} matrix", self.cols, self.shape_str()),
+                format!(
+                    "a vector of length {} for a {} matrix",
+                    self.cols,
+                    self.shape_str()
+                ),
                 format!("length {}", v.len()),
             ));
         }
@@ -480,7 +486,11 @@ impl<'g> Matrix<'g> {
         Matrix {
             rows: self.rows,
             cols: self.cols,
-            data: self.data.iter().map(|&a| a * s.into_expr(a.graph)).collect(),
+            data: self
+                .data
+                .iter()
+                .map(|&a| a * s.into_expr(a.graph))
+                .collect(),
         }
     }
 }
@@ -506,11 +516,7 @@ impl<'g> Index<(usize, usize)> for Matrix<'g> {
 pub fn skew<'g>(a: &[Expr<'g>]) -> Result<Matrix<'g>> {
     expect_len("skew", a, 3, "a vector")?;
     let z = a[0].graph.zero();
-    Matrix::from_row_major(
-        3,
-        3,
-        vec![z, -a[2], a[1], a[2], z, -a[0], -a[1], a[0], z],
-    )
+    Matrix::from_row_major(3, 3, vec![z, -a[2], a[1], a[2], z, -a[0], -a[1], a[0], z])
 }
 
 /// The inverse of [`skew`] ("vee"): `(m[2][1], m[0][2], m[1][0])`. For a matrix that is not

@@ -62,7 +62,10 @@ pub fn quadrotor_rates(g: &Graph) -> Result<OdeModel<'_>> {
         .iter()
         .map(|n| g.symbol(n))
         .collect();
-    let u: Vector<'_> = ["c", "wx", "wy", "wz"].iter().map(|n| g.symbol(n)).collect();
+    let u: Vector<'_> = ["c", "wx", "wy", "wz"]
+        .iter()
+        .map(|n| g.symbol(n))
+        .collect();
     let xdot = quadrotor_rates_rhs(&x, &u)?;
     Ok(OdeModel { x, u, xdot })
 }
