@@ -41,13 +41,7 @@ fn precedence(node: &Node) -> u8 {
         Node::Binary(BinaryOp::Add | BinaryOp::Sub, ..) => 1,
         Node::Binary(BinaryOp::Mul | BinaryOp::Div, ..) => 2,
         Node::Unary(UnaryOp::Neg, _) => 3,
-        Node::Const(_) => {
-            if node.const_value().is_some_and(|v| v < 0.0) {
-                3
-            } else {
-                5
-            }
-        }
+        Node::Const(_) if node.const_value().is_some_and(|v| v < 0.0) => 3,
         _ => 5,
     }
 }

@@ -8,7 +8,7 @@
 
 use mpc_dsl::{Expr, Graph};
 use nalgebra::SVector;
-use num_dual::{DualNum, DualStruct};
+use num_dual::DualNum;
 use proptest::prelude::*;
 
 const N_INPUTS: usize = 3;
