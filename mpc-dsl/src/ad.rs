@@ -1,7 +1,7 @@
 //! Automatic differentiation on the graph: every derivative is a new expression in the same
 //! graph, so it can be simplified, differentiated again, evaluated or lowered to code.
 //!
-//! One table of local partial derivatives ([`partial`]) serves both modes:
+//! One table of local partial derivatives (`partial`) serves both modes:
 //!
 //! - forward mode ([`Graph::jvp`]): one sweep in topological order per direction, computing
 //!   `J v`;
@@ -20,60 +20,115 @@ use crate::ops::{BinaryOp, UnaryOp};
 
 const NONE: u32 = u32::MAX;
 
-/// The local partial derivative of node `n` (whose value is `f`) with respect to its operand
-/// number `which` (0 or 1), or `None` where it is identically zero.
-fn partial<'g>(g: &'g Graph, f: Expr<'g>, which: usize) -> Option<Expr<'g>> {
+/// How a derivative flows through one edge: `d parent = ± (d child) * factor`, with the
+/// division and unit cases kept apart so that no `1/b`, `-x` or `x*1` node is built for them.
+#[derive(Clone, Copy)]
+enum Factor<'g> {
+    /// Multiply by 1.
+    Unit,
+    /// Multiply by the expression.
+    Mul(Expr<'g>),
+    /// Divide by the expression.
+    Div(Expr<'g>),
+}
+
+/// One edge's local derivative: a factor and a sign.
+#[derive(Clone, Copy)]
+struct Local<'g> {
+    factor: Factor<'g>,
+    negate: bool,
+}
+
+impl<'g> Local<'g> {
+    fn plus(factor: Factor<'g>) -> Option<Local<'g>> {
+        Some(Local {
+            factor,
+            negate: false,
+        })
+    }
+
+    fn minus(factor: Factor<'g>) -> Option<Local<'g>> {
+        Some(Local {
+            factor,
+            negate: true,
+        })
+    }
+
+    /// The magnitude of this edge's contribution for an incoming derivative `d` (reverse:
+    /// an adjoint; forward: a tangent). The sign is applied when accumulating.
+    fn apply(self, d: Expr<'g>) -> Expr<'g> {
+        match self.factor {
+            Factor::Unit => d,
+            Factor::Mul(p) => d * p,
+            Factor::Div(q) => d / q,
+        }
+    }
+}
+
+/// Adds `± term` to an accumulator slot (`NONE` = zero so far).
+fn accumulate<'g>(g: &'g Graph, slot: &mut u32, term: Expr<'g>, negate: bool) {
+    *slot = match (*slot, negate) {
+        (NONE, false) => term.id,
+        (NONE, true) => (-term).id,
+        (s, false) => (g.wrap(s) + term).id,
+        (s, true) => (g.wrap(s) - term).id,
+    };
+}
+
+/// The local derivative of node `f` with respect to its operand number `which` (0 or 1), or
+/// `None` where it is identically zero. This is the one derivative table of the crate.
+fn partial<'g>(g: &'g Graph, f: Expr<'g>, which: usize) -> Option<Local<'g>> {
+    use Factor::{Div, Mul, Unit};
     let w = |id: NodeId| g.wrap(id);
-    Some(match g.node(f.id) {
-        Node::Const(_) | Node::Symbol(_) => return None,
+    match g.node(f.id) {
+        Node::Const(_) | Node::Symbol(_) => None,
         Node::Unary(op, a) => {
             let a = w(a);
             match op {
-                UnaryOp::Neg => g.constant_unchecked(-1.0),
+                UnaryOp::Neg => Local::minus(Unit),
                 // d sqrt(a) = 1 / (2 sqrt(a))
-                UnaryOp::Sqrt => 0.5 / f,
-                UnaryOp::Sin => a.cos(),
-                UnaryOp::Cos => -a.sin(),
+                UnaryOp::Sqrt => Local::plus(Mul(0.5 / f)),
+                UnaryOp::Sin => Local::plus(Mul(a.cos())),
+                UnaryOp::Cos => Local::minus(Mul(a.sin())),
                 // d tan(a) = 1 + tan(a)^2
-                UnaryOp::Tan => 1.0 + f.square(),
+                UnaryOp::Tan => Local::plus(Mul(1.0 + f.square())),
                 // d asin(a) = 1 / sqrt(1 - a^2); d acos(a) = -1 / sqrt(1 - a^2)
-                UnaryOp::Asin => 1.0 / (1.0 - a.square()).sqrt(),
-                UnaryOp::Acos => -(1.0 / (1.0 - a.square()).sqrt()),
-                UnaryOp::Atan => 1.0 / (1.0 + a.square()),
-                UnaryOp::Exp => f,
-                UnaryOp::Log => 1.0 / a,
+                UnaryOp::Asin => Local::plus(Div((1.0 - a.square()).sqrt())),
+                UnaryOp::Acos => Local::minus(Div((1.0 - a.square()).sqrt())),
+                UnaryOp::Atan => Local::plus(Div(1.0 + a.square())),
+                UnaryOp::Exp => Local::plus(Mul(f)),
+                UnaryOp::Log => Local::plus(Div(a)),
                 // d tanh(a) = 1 - tanh(a)^2
-                UnaryOp::Tanh => 1.0 - f.square(),
-                UnaryOp::Abs => a.sign(),
-                UnaryOp::Sign | UnaryOp::Step => return None,
+                UnaryOp::Tanh => Local::plus(Mul(1.0 - f.square())),
+                UnaryOp::Abs => Local::plus(Mul(a.sign())),
+                UnaryOp::Sign | UnaryOp::Step => None,
             }
         }
-        Node::PowI(a, k) => f64::from(k) * w(a).powi(k - 1),
+        Node::PowI(a, k) => Local::plus(Mul(f64::from(k) * w(a).powi(k - 1))),
         Node::Binary(op, a, b) => {
             let (a, b) = (w(a), w(b));
             match (op, which) {
-                (BinaryOp::Add, _) => g.one(),
-                (BinaryOp::Sub, 0) => g.one(),
-                (BinaryOp::Sub, _) => g.constant_unchecked(-1.0),
-                (BinaryOp::Mul, 0) => b,
-                (BinaryOp::Mul, _) => a,
+                (BinaryOp::Add, _) | (BinaryOp::Sub, 0) => Local::plus(Unit),
+                (BinaryOp::Sub, _) => Local::minus(Unit),
+                (BinaryOp::Mul, 0) => Local::plus(Mul(b)),
+                (BinaryOp::Mul, _) => Local::plus(Mul(a)),
                 // d(a/b) = da / b - (a/b) db / b
-                (BinaryOp::Div, 0) => 1.0 / b,
-                (BinaryOp::Div, _) => -(f / b),
+                (BinaryOp::Div, 0) => Local::plus(Div(b)),
+                (BinaryOp::Div, _) => Local::minus(Mul(f / b)),
                 // d(a^b) = b a^(b-1) da + a^b ln(a) db
-                (BinaryOp::Pow, 0) => b * a.pow(b - 1.0),
-                (BinaryOp::Pow, _) => f * a.ln(),
+                (BinaryOp::Pow, 0) => Local::plus(Mul(b * a.pow(b - 1.0))),
+                (BinaryOp::Pow, _) => Local::plus(Mul(f * a.ln())),
                 // atan2(y, x): dy x / (x^2 + y^2) - dx y / (x^2 + y^2)
-                (BinaryOp::Atan2, 0) => b / (a.square() + b.square()),
-                (BinaryOp::Atan2, _) => -(a / (a.square() + b.square())),
+                (BinaryOp::Atan2, 0) => Local::plus(Mul(b / (a.square() + b.square()))),
+                (BinaryOp::Atan2, _) => Local::minus(Mul(a / (a.square() + b.square()))),
                 // min(a, b) follows a where a <= b; max(a, b) follows a where a >= b.
-                (BinaryOp::Min, 0) => (b - a).step(),
-                (BinaryOp::Min, _) => 1.0 - (b - a).step(),
-                (BinaryOp::Max, 0) => (a - b).step(),
-                (BinaryOp::Max, _) => 1.0 - (a - b).step(),
+                (BinaryOp::Min, 0) => Local::plus(Mul((b - a).step())),
+                (BinaryOp::Min, _) => Local::plus(Mul(1.0 - (b - a).step())),
+                (BinaryOp::Max, 0) => Local::plus(Mul((a - b).step())),
+                (BinaryOp::Max, _) => Local::plus(Mul(1.0 - (a - b).step())),
             }
         }
-    })
+    }
 }
 
 /// Nodes reachable from some roots, with the subset that depends on the variables.
@@ -121,23 +176,17 @@ impl Graph {
             }
             let f = self.wrap(n);
             let node = self.node(n);
-            let mut acc: Option<Expr<'_>> = None;
+            let mut acc = NONE;
             for (i, c) in node.children().enumerate() {
                 let t = tangent[c as usize];
                 if t == NONE {
                     continue;
                 }
-                if let Some(p) = partial(self, f, i) {
-                    let term = p * self.wrap(t);
-                    acc = Some(match acc {
-                        Some(s) => s + term,
-                        None => term,
-                    });
+                if let Some(local) = partial(self, f, i) {
+                    accumulate(self, &mut acc, local.apply(self.wrap(t)), local.negate);
                 }
             }
-            if let Some(t) = acc {
-                tangent[n as usize] = t.id;
-            }
+            tangent[n as usize] = acc;
         }
     }
 
@@ -155,14 +204,9 @@ impl Graph {
                 if !tape.active[c as usize] {
                     continue;
                 }
-                if let Some(p) = partial(self, f, i) {
-                    let term = self.wrap(a) * p;
-                    let slot = &mut adjoint[c as usize];
-                    *slot = if *slot == NONE {
-                        term.id
-                    } else {
-                        (self.wrap(*slot) + term).id
-                    };
+                if let Some(local) = partial(self, f, i) {
+                    let term = local.apply(self.wrap(a));
+                    accumulate(self, &mut adjoint[c as usize], term, local.negate);
                 }
             }
         }
@@ -244,12 +288,7 @@ impl Graph {
             if !tape.active[r as usize] || w.is_zero() {
                 continue;
             }
-            let slot = &mut adjoint[r as usize];
-            *slot = if *slot == NONE {
-                w.id
-            } else {
-                (self.wrap(*slot) + w).id
-            };
+            accumulate(self, &mut adjoint[r as usize], w, false);
         }
         self.reverse_sweep(&tape, &mut adjoint);
         Ok(vars

@@ -77,6 +77,15 @@ impl Inner {
     }
 }
 
+/// Buckets behind a hashbrown table of the given capacity (7/8 load factor from 8 buckets on).
+fn hash_buckets(capacity: usize) -> usize {
+    match capacity {
+        0 => 0,
+        1..=7 => (capacity + 1).next_power_of_two(),
+        _ => (capacity * 8 / 7).next_power_of_two(),
+    }
+}
+
 /// An arena of hash-consed scalar expressions.
 ///
 /// Create one per model (or per program run); every [`Expr`] borrows it. Expressions from
@@ -153,7 +162,7 @@ impl Graph {
     pub fn heap_bytes(&self) -> usize {
         let inner = self.inner.borrow();
         inner.nodes.capacity() * size_of::<Node>()
-            + inner.table.capacity() * (size_of::<NodeId>() + 1)
+            + hash_buckets(inner.table.capacity()) * (size_of::<NodeId>() + 1)
             + inner
                 .symbol_names
                 .iter()

@@ -81,30 +81,37 @@ impl Graph {
         for (k, &s) in sym_idx.iter().enumerate() {
             input_pos[s as usize] = k as u32;
         }
-        // Operand of every lowered node; absent = not lowered yet.
-        let mut lowered: hashbrown::HashMap<NodeId, Operand> = hashbrown::HashMap::new();
+        // Operand of every lowered node, indexed by node id; `None` = not lowered yet.
+        let mut lowered: Vec<Option<Operand>> = vec![None; inner.nodes.len()];
         let mut instrs = Vec::new();
         let mut stack: Vec<(NodeId, bool)> = Vec::new();
         let mut out = Vec::with_capacity(outputs.len());
         for &o in outputs {
             stack.push((o.id, false));
             while let Some((n, expanded)) = stack.pop() {
-                if lowered.contains_key(&n) {
+                if lowered[n as usize].is_some() {
                     continue;
                 }
                 let node = inner.nodes[n as usize];
                 if !expanded {
                     stack.push((n, true));
                     // Push operands in reverse so the first operand is lowered first.
-                    let kids: Vec<NodeId> = node.children().collect();
-                    for &c in kids.iter().rev() {
-                        if !lowered.contains_key(&c) {
+                    let (first, second) = match node {
+                        Node::Const(_) | Node::Symbol(_) => (None, None),
+                        Node::Unary(_, a) | Node::PowI(a, _) => (Some(a), None),
+                        Node::Binary(_, a, b) => (Some(a), Some(b)),
+                    };
+                    for c in [second, first].into_iter().flatten() {
+                        if lowered[c as usize].is_none() {
                             stack.push((c, false));
                         }
                     }
                     continue;
                 }
-                let op = |c: NodeId| lowered[&c];
+                let op = |c: NodeId| {
+                    lowered[c as usize]
+                        .unwrap_or_else(|| unreachable!("operands are lowered first"))
+                };
                 let operand = match node {
                     Node::Const(_) => {
                         let v = node.const_value().unwrap_or(f64::NAN);
@@ -134,9 +141,9 @@ impl Graph {
                         Operand::Temp(instrs.len() as u32 - 1)
                     }
                 };
-                lowered.insert(n, operand);
+                lowered[n as usize] = Some(operand);
             }
-            out.push(lowered[&o.id]);
+            out.push(lowered[o.id as usize].unwrap_or_else(|| unreachable!("output lowered")));
         }
         Ok(Program {
             inputs: sym_idx

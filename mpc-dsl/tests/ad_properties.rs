@@ -383,8 +383,8 @@ fn sparsity_excludes_independent_and_cancelled_entries() {
     assert_eq!(jac.get(1, 2), Some(g.one()));
     assert_eq!(
         jac.get(0, 1),
-        Some(p * x),
-        "d(x y p)/dy = adjoint p times partial x"
+        Some(x * p),
+        "d(x y p)/dy by forward mode (4 outputs > 3 variables): tangent x, times p"
     );
     assert_eq!(jac.nnz(), 4);
     assert_eq!(jac.sparsity().row_ptr(), &[0, 2, 3, 4, 4]);
