@@ -1,0 +1,3 @@
+//! mpc-runtime (work in progress).
+#![no_std]
+#![forbid(unsafe_code)]
