@@ -1,3 +1,35 @@
-//! mpc-runtime (work in progress).
+//! # mpc-runtime
+//!
+//! The engine every mpcc-generated solver runs on: a structured OCP-QP interior-point solver
+//! with a Riccati recursion ([`qp`]) and, on top, the real-time-iteration SQP loop.
+//!
+//! `#![no_std]`, no heap, no `unsafe`: every workspace is a struct of fixed-size arrays whose
+//! sizes are const generics, with a `const NEW` so it can live in a `static`. Linear algebra on
+//! the small fixed-size blocks is nalgebra's (`SMatrix`, Cholesky), math goes through `libm`.
+//!
+//! Panics: the public API does not panic on any input. Indexing inside the crate is over
+//! arrays whose length is the const generic the loop runs to, so it cannot go out of bounds;
+//! `clippy::indexing_slicing` is not enabled for that reason, while `unwrap`, `expect` and
+//! `panic!` are denied.
 #![no_std]
 #![forbid(unsafe_code)]
+#![deny(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
+use nalgebra::{ArrayStorage, SMatrix};
+
+pub mod qp;
+pub mod real;
+mod rows;
+
+pub use qp::{OcpQp, QpInfo, QpSettings, QpSolution, QpSolver, QpStage, QpStatus, QpTerminal};
+pub use real::Real;
+
+/// A zero matrix, usable in constants.
+pub(crate) const fn zeros<T: Real, const R: usize, const C: usize>() -> SMatrix<T, R, C> {
+    SMatrix::from_array_storage(ArrayStorage([[T::ZERO; R]; C]))
+}
+
+/// A matrix with every entry `v`, usable in constants.
+pub(crate) const fn filled<T: Real, const R: usize, const C: usize>(v: T) -> SMatrix<T, R, C> {
+    SMatrix::from_array_storage(ArrayStorage([[v; R]; C]))
+}

@@ -1,0 +1,855 @@
+//! The structured OCP-QP and its primal-dual interior-point solver.
+//!
+//! ```text
+//! min  sum_{k<N} ( 1/2 x_k'Q_k x_k + u_k'S_k x_k + 1/2 u_k'R_k u_k + gx_k'x_k + gu_k'u_k )
+//!        + 1/2 x_N'Q_N x_N + gx_N'x_N
+//! s.t. x_0 = x0 (given)
+//!      x_{k+1} = A_k x_k + B_k u_k + f_k
+//!      lbx_k <= x_k <= ubx_k (k >= 1),  lbu_k <= u_k <= ubu_k
+//!      lg_k <= C_k x_k + D_k u_k <= ug_k,  lg_N <= C_N x_N <= ug_N
+//! ```
+//!
+//! Bounds at or beyond `Real::INF` in magnitude are absent. The method is Mehrotra's
+//! predictor-corrector; each Newton system is a linear-quadratic problem with the Hessian
+//! `H + G' diag(lam/t) G`, solved by a backward Riccati recursion (Cholesky of
+//! `R + B'PB`, `O(N (nx + nu)^3)`), factorized once per iteration and solved twice.
+
+use nalgebra::{SMatrix, SVector};
+
+use crate::real::Real;
+use crate::rows::{BoundError, Rhs, Rows};
+
+type Mat<T, const R: usize, const C: usize> = SMatrix<T, R, C>;
+type Vect<T, const R: usize> = SVector<T, R>;
+
+/// Iterations without primal progress after which a QP is declared infeasible.
+const STALL_LIMIT: u32 = 10;
+
+/// Data of one stage `k < N`.
+#[derive(Clone, Copy, Debug)]
+pub struct QpStage<T: Real, const NX: usize, const NU: usize, const NG: usize> {
+    /// State Hessian `Q`.
+    pub q: Mat<T, NX, NX>,
+    /// Cross term `S` (`u'S x`).
+    pub s: Mat<T, NU, NX>,
+    /// Control Hessian `R`.
+    pub r: Mat<T, NU, NU>,
+    /// State gradient.
+    pub gx: Vect<T, NX>,
+    /// Control gradient.
+    pub gu: Vect<T, NU>,
+    /// Dynamics `A`.
+    pub a: Mat<T, NX, NX>,
+    /// Dynamics `B`.
+    pub b: Mat<T, NX, NU>,
+    /// Dynamics offset `f`.
+    pub f: Vect<T, NX>,
+    /// State lower bound (ignored at stage 0, where the state is fixed).
+    pub lbx: Vect<T, NX>,
+    /// State upper bound (ignored at stage 0).
+    pub ubx: Vect<T, NX>,
+    /// Control lower bound.
+    pub lbu: Vect<T, NU>,
+    /// Control upper bound.
+    pub ubu: Vect<T, NU>,
+    /// General constraint matrix on the state.
+    pub c: Mat<T, NG, NX>,
+    /// General constraint matrix on the control.
+    pub d: Mat<T, NG, NU>,
+    /// General constraint lower bound.
+    pub lg: Vect<T, NG>,
+    /// General constraint upper bound.
+    pub ug: Vect<T, NG>,
+}
+
+/// Data of the terminal stage `N`.
+#[derive(Clone, Copy, Debug)]
+pub struct QpTerminal<T: Real, const NX: usize, const NGN: usize> {
+    /// Terminal Hessian.
+    pub q: Mat<T, NX, NX>,
+    /// Terminal gradient.
+    pub gx: Vect<T, NX>,
+    /// Terminal state lower bound.
+    pub lbx: Vect<T, NX>,
+    /// Terminal state upper bound.
+    pub ubx: Vect<T, NX>,
+    /// Terminal general constraint matrix.
+    pub c: Mat<T, NGN, NX>,
+    /// Terminal general constraint lower bound.
+    pub lg: Vect<T, NGN>,
+    /// Terminal general constraint upper bound.
+    pub ug: Vect<T, NGN>,
+}
+
+impl<T: Real, const NX: usize, const NU: usize, const NG: usize> QpStage<T, NX, NU, NG> {
+    /// All zeros, bounds absent.
+    pub const NEW: Self = QpStage {
+        q: crate::zeros(),
+        s: crate::zeros(),
+        r: crate::zeros(),
+        gx: crate::zeros(),
+        gu: crate::zeros(),
+        a: crate::zeros(),
+        b: crate::zeros(),
+        f: crate::zeros(),
+        lbx: crate::filled(T::NEG_INF),
+        ubx: crate::filled(T::INF),
+        lbu: crate::filled(T::NEG_INF),
+        ubu: crate::filled(T::INF),
+        c: crate::zeros(),
+        d: crate::zeros(),
+        lg: crate::filled(T::NEG_INF),
+        ug: crate::filled(T::INF),
+    };
+}
+
+impl<T: Real, const NX: usize, const NGN: usize> QpTerminal<T, NX, NGN> {
+    /// All zeros, bounds absent.
+    pub const NEW: Self = QpTerminal {
+        q: crate::zeros(),
+        gx: crate::zeros(),
+        lbx: crate::filled(T::NEG_INF),
+        ubx: crate::filled(T::INF),
+        c: crate::zeros(),
+        lg: crate::filled(T::NEG_INF),
+        ug: crate::filled(T::INF),
+    };
+}
+
+/// A whole OCP-QP.
+#[derive(Clone, Copy, Debug)]
+pub struct OcpQp<
+    T: Real,
+    const NX: usize,
+    const NU: usize,
+    const NG: usize,
+    const NGN: usize,
+    const N: usize,
+> {
+    /// The fixed initial state.
+    pub x0: Vect<T, NX>,
+    /// Stages `0..N`.
+    pub stages: [QpStage<T, NX, NU, NG>; N],
+    /// Stage `N`.
+    pub terminal: QpTerminal<T, NX, NGN>,
+}
+
+impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usize, const N: usize>
+    OcpQp<T, NX, NU, NG, NGN, N>
+{
+    /// All zeros, bounds absent.
+    pub const NEW: Self = OcpQp {
+        x0: crate::zeros(),
+        stages: [QpStage::NEW; N],
+        terminal: QpTerminal::NEW,
+    };
+}
+
+impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usize, const N: usize>
+    Default for OcpQp<T, NX, NU, NG, NGN, N>
+{
+    fn default() -> Self {
+        Self::NEW
+    }
+}
+
+/// Solver settings.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct QpSettings<T> {
+    /// Iteration limit (bounds the worst-case time).
+    pub max_iter: u32,
+    /// Tolerance on the stationarity residual (infinity norm, relative to the largest of the
+    /// terms that make it up when that exceeds 1).
+    pub tol_stat: T,
+    /// Tolerance on the dynamics residual.
+    pub tol_eq: T,
+    /// Tolerance on the inequality residual.
+    pub tol_ineq: T,
+    /// Tolerance on the average complementarity `t'lam / m`.
+    pub tol_comp: T,
+    /// Diagonal regularization added to `R + B'PB` before its Cholesky factorization.
+    pub reg: T,
+    /// Start from the previous primal solution instead of zero.
+    pub warm_start: bool,
+    /// Initial complementarity `t lam` of every inequality.
+    pub mu0: T,
+    /// Iterative-refinement steps per Newton solve (each costs one Riccati back-substitution,
+    /// not a factorization); recovers accuracy the Riccati matrices lose to large barrier
+    /// terms, which matters in `f32`.
+    pub refine: u32,
+}
+
+impl<T: Real> QpSettings<T> {
+    /// Defaults for the precision: tolerances `Real::DEFAULT_TOL`, 50 iterations.
+    pub const DEFAULT: Self = QpSettings {
+        max_iter: 50,
+        tol_stat: T::DEFAULT_TOL,
+        tol_eq: T::DEFAULT_TOL,
+        tol_ineq: T::DEFAULT_TOL,
+        tol_comp: T::DEFAULT_TOL_COMP,
+        reg: T::DEFAULT_REG,
+        warm_start: false,
+        mu0: T::ONE,
+        refine: 1,
+    };
+}
+
+impl<T: Real> Default for QpSettings<T> {
+    fn default() -> Self {
+        Self::DEFAULT
+    }
+}
+
+/// Outcome of a QP solve.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(C)]
+pub enum QpStatus {
+    /// All residuals below tolerance.
+    Solved = 0,
+    /// The iteration limit was reached first.
+    MaxIterations = 1,
+    /// The constraints cannot be met (crossed bounds, or multipliers diverging).
+    Infeasible = 2,
+    /// The input contains NaN or infinite data (other than absent bounds).
+    NonFiniteInput = 3,
+    /// The Newton system could not be factorized even with increased regularization.
+    NumericalError = 4,
+}
+
+/// Status and residuals of the last solve.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct QpInfo<T> {
+    /// How the solve ended.
+    pub status: QpStatus,
+    /// Interior-point iterations taken.
+    pub iterations: u32,
+    /// Stationarity residual (infinity norm).
+    pub res_stat: T,
+    /// Dynamics residual.
+    pub res_eq: T,
+    /// Inequality residual.
+    pub res_ineq: T,
+    /// Average complementarity.
+    pub mu: T,
+}
+
+/// Primal and dual solution.
+#[derive(Clone, Copy, Debug)]
+pub struct QpSolution<T: Real, const NX: usize, const NU: usize, const N: usize> {
+    /// States `x_0..x_{N-1}` (`x_0` is the given initial state).
+    pub x: [Vect<T, NX>; N],
+    /// Terminal state `x_N`.
+    pub xn: Vect<T, NX>,
+    /// Controls `u_0..u_{N-1}`.
+    pub u: [Vect<T, NU>; N],
+    /// Multipliers of the dynamics `x_{k+1} = A_k x_k + B_k u_k + f_k`.
+    pub pi: [Vect<T, NX>; N],
+}
+
+impl<T: Real, const NX: usize, const NU: usize, const N: usize> QpSolution<T, NX, NU, N> {
+    /// All zeros.
+    pub const NEW: Self = QpSolution {
+        x: [crate::zeros(); N],
+        xn: crate::zeros(),
+        u: [crate::zeros(); N],
+        pi: [crate::zeros(); N],
+    };
+
+    /// State `k` for `k <= N`.
+    pub fn state(&self, k: usize) -> Option<&Vect<T, NX>> {
+        if k == N {
+            Some(&self.xn)
+        } else {
+            self.x.get(k)
+        }
+    }
+}
+
+/// Interior-point and Riccati workspace for one QP size. Holds everything; never allocates.
+#[derive(Clone, Debug)]
+pub struct QpSolver<
+    T: Real,
+    const NX: usize,
+    const NU: usize,
+    const NG: usize,
+    const NGN: usize,
+    const N: usize,
+> {
+    /// Settings used by [`solve`](Self::solve).
+    pub settings: QpSettings<T>,
+    sol: QpSolution<T, NX, NU, N>,
+    rx: [Rows<T, NX>; N],
+    ru: [Rows<T, NU>; N],
+    rg: [Rows<T, NG>; N],
+    rxn: Rows<T, NX>,
+    rgn: Rows<T, NGN>,
+    /// Dynamics residuals `A x + B u + f - x_next`.
+    rb: [Vect<T, NX>; N],
+    /// `H y + g` per stage (without the inequality terms).
+    hx: [Vect<T, NX>; N],
+    hu: [Vect<T, NU>; N],
+    hxn: Vect<T, NX>,
+    /// Riccati: `P_{k+1}`, `p_{k+1}`, Cholesky factor of `R + B'PB`, `S + B'PA`, gain `K`.
+    pn: [Mat<T, NX, NX>; N],
+    pvn: [Vect<T, NX>; N],
+    l: [Mat<T, NU, NU>; N],
+    sbar: [Mat<T, NU, NX>; N],
+    kmat: [Mat<T, NU, NX>; N],
+    kv: [Vect<T, NU>; N],
+    /// Right-hand side of the linear-quadratic subproblem: reduced gradients and dynamics
+    /// residuals.
+    gxt: [Vect<T, NX>; N],
+    gut: [Vect<T, NU>; N],
+    gnt: Vect<T, NX>,
+    rbt: [Vect<T, NX>; N],
+    /// The same right-hand side as first built (iterative refinement overwrites the above).
+    gx0: [Vect<T, NX>; N],
+    gu0: [Vect<T, NU>; N],
+    gn0: Vect<T, NX>,
+    /// Newton direction and new dynamics multipliers.
+    dx: [Vect<T, NX>; N],
+    dxn: Vect<T, NX>,
+    du: [Vect<T, NU>; N],
+    pi_new: [Vect<T, NX>; N],
+}
+
+impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usize, const N: usize>
+    Default for QpSolver<T, NX, NU, NG, NGN, N>
+{
+    fn default() -> Self {
+        Self::NEW
+    }
+}
+
+fn finite_mat<T: Real, const R: usize, const C: usize>(m: &Mat<T, R, C>) -> bool {
+    m.iter().all(|v| v.finite())
+}
+
+fn no_nan<T: Real, const R: usize>(v: &Vect<T, R>) -> bool {
+    !v.iter().any(|x| x.nan())
+}
+
+impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usize, const N: usize>
+    QpSolver<T, NX, NU, NG, NGN, N>
+{
+    /// A solver with default settings; usable in a `static`.
+    pub const NEW: Self = QpSolver {
+        settings: QpSettings::DEFAULT,
+        sol: QpSolution::NEW,
+        rx: [Rows::NEW; N],
+        ru: [Rows::NEW; N],
+        rg: [Rows::NEW; N],
+        rxn: Rows::NEW,
+        rgn: Rows::NEW,
+        rb: [crate::zeros(); N],
+        hx: [crate::zeros(); N],
+        hu: [crate::zeros(); N],
+        hxn: crate::zeros(),
+        pn: [crate::zeros(); N],
+        pvn: [crate::zeros(); N],
+        l: [crate::zeros(); N],
+        sbar: [crate::zeros(); N],
+        kmat: [crate::zeros(); N],
+        kv: [crate::zeros(); N],
+        gxt: [crate::zeros(); N],
+        gut: [crate::zeros(); N],
+        gnt: crate::zeros(),
+        rbt: [crate::zeros(); N],
+        gx0: [crate::zeros(); N],
+        gu0: [crate::zeros(); N],
+        gn0: crate::zeros(),
+        dx: [crate::zeros(); N],
+        dxn: crate::zeros(),
+        du: [crate::zeros(); N],
+        pi_new: [crate::zeros(); N],
+    };
+
+    /// The last solution (primal and dynamics multipliers).
+    pub fn solution(&self) -> &QpSolution<T, NX, NU, N> {
+        &self.sol
+    }
+
+    /// Sets the primal starting point used when `settings.warm_start` is on.
+    pub fn set_initial_guess(&mut self, guess: &QpSolution<T, NX, NU, N>) {
+        self.sol = *guess;
+    }
+
+    fn check_input(&self, qp: &OcpQp<T, NX, NU, NG, NGN, N>) -> bool {
+        if !qp.x0.iter().all(|v| v.finite()) {
+            return false;
+        }
+        for s in &qp.stages {
+            let mats = finite_mat(&s.q)
+                && finite_mat(&s.s)
+                && finite_mat(&s.r)
+                && finite_mat(&s.gx)
+                && finite_mat(&s.gu)
+                && finite_mat(&s.a)
+                && finite_mat(&s.b)
+                && finite_mat(&s.f)
+                && finite_mat(&s.c)
+                && finite_mat(&s.d);
+            let bounds = no_nan(&s.lbx)
+                && no_nan(&s.ubx)
+                && no_nan(&s.lbu)
+                && no_nan(&s.ubu)
+                && no_nan(&s.lg)
+                && no_nan(&s.ug);
+            if !(mats && bounds) {
+                return false;
+            }
+        }
+        let t = &qp.terminal;
+        finite_mat(&t.q)
+            && finite_mat(&t.gx)
+            && finite_mat(&t.c)
+            && no_nan(&t.lbx)
+            && no_nan(&t.ubx)
+            && no_nan(&t.lg)
+            && no_nan(&t.ug)
+    }
+
+    fn load_bounds(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N>) -> Result<(), BoundError> {
+        for (k, s) in qp.stages.iter().enumerate() {
+            if let (Some(rx), Some(ru), Some(rg)) =
+                (self.rx.get_mut(k), self.ru.get_mut(k), self.rg.get_mut(k))
+            {
+                rx.set_bounds(&s.lbx, &s.ubx, k > 0)?;
+                ru.set_bounds(&s.lbu, &s.ubu, true)?;
+                rg.set_bounds(&s.lg, &s.ug, true)?;
+            }
+        }
+        self.rxn
+            .set_bounds(&qp.terminal.lbx, &qp.terminal.ubx, true)?;
+        self.rgn
+            .set_bounds(&qp.terminal.lg, &qp.terminal.ug, true)?;
+        Ok(())
+    }
+
+    fn info(&self, status: QpStatus, iterations: u32, res: [T; 4]) -> QpInfo<T> {
+        QpInfo {
+            status,
+            iterations,
+            res_stat: res[0],
+            res_eq: res[1],
+            res_ineq: res[2],
+            mu: res[3],
+        }
+    }
+
+    /// Solves `qp`. The solution is available from [`solution`](Self::solution) whatever the
+    /// status (for a status other than `Solved` it is the last iterate).
+    pub fn solve(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N>) -> QpInfo<T> {
+        let nan = T::ZERO;
+        if !self.check_input(qp) {
+            return self.info(QpStatus::NonFiniteInput, 0, [nan; 4]);
+        }
+        if self.load_bounds(qp).is_err() {
+            return self.info(QpStatus::Infeasible, 0, [nan; 4]);
+        }
+        let m = self.rx.iter().map(Rows::count).sum::<usize>()
+            + self.ru.iter().map(Rows::count).sum::<usize>()
+            + self.rg.iter().map(Rows::count).sum::<usize>()
+            + self.rxn.count()
+            + self.rgn.count();
+        let m_real = T::lit(m.max(1) as f64);
+
+        // Starting point.
+        if !self.settings.warm_start {
+            self.sol = QpSolution::NEW;
+        }
+        if let Some(x) = self.sol.x.first_mut() {
+            *x = qp.x0;
+        }
+        let floor = T::ONE;
+        let mu0 = self.settings.mu0;
+        for k in 0..N {
+            let (x, u) = (self.sol.x[k], self.sol.u[k]);
+            let s = &qp.stages[k];
+            self.rx[k].init(&x, floor, mu0);
+            self.ru[k].init(&u, floor, mu0);
+            self.rg[k].init(&(s.c * x + s.d * u), floor, mu0);
+        }
+        let xn = self.sol.xn;
+        self.rxn.init(&xn, floor, mu0);
+        self.rgn.init(&(qp.terminal.c * xn), floor, mu0);
+
+        let st = self.settings;
+        let diverge = T::lit(1e12).min(T::ONE / (T::EPSILON * T::EPSILON));
+        let mut res;
+        // Primal infeasibility of the previous iteration and how many iterations in a row it
+        // has not decreased: a feasible problem's primal residual shrinks by (1 - alpha) every
+        // iteration; one stuck for many iterations means the constraints cannot be met.
+        let (mut prev_primal, mut stalled) = (T::INF, 0u32);
+        for iter in 0..st.max_iter {
+            res = self.residuals(qp);
+            let mu = res[3] / m_real;
+            res[3] = mu;
+            if !res.iter().all(|r| r.finite()) {
+                return self.info(QpStatus::Infeasible, iter, res);
+            }
+            let primal = res[1].max(res[2]);
+            if primal > st.tol_eq.max(st.tol_ineq) && primal >= T::lit(0.99) * prev_primal {
+                stalled += 1;
+                if stalled >= STALL_LIMIT {
+                    return self.info(QpStatus::Infeasible, iter, res);
+                }
+            } else {
+                stalled = 0;
+            }
+            prev_primal = primal;
+            if res[0] <= st.tol_stat
+                && res[1] <= st.tol_eq
+                && res[2] <= st.tol_ineq
+                && mu <= st.tol_comp
+            {
+                return self.info(QpStatus::Solved, iter, res);
+            }
+            if self.max_multiplier() > diverge {
+                return self.info(QpStatus::Infeasible, iter, res);
+            }
+            if !self.factorize(qp) {
+                return self.info(QpStatus::NumericalError, iter, res);
+            }
+            // Predictor.
+            self.newton_direction(qp, Rhs::Affine);
+            self.save_affine();
+            let alpha_aff = self.max_step(T::ONE);
+            let mu_aff = self.complementarity_after(alpha_aff) / m_real;
+            let ratio = if mu > T::ZERO { mu_aff / mu } else { T::ZERO };
+            let sigma = ratio * ratio * ratio;
+            // Corrector. Its complementarity target never goes below a tenth of the
+            // tolerance: driving slacks further down only buries them in rounding noise
+            // (in f32 that breaks the iteration), and is not needed to stop.
+            let target = (sigma * mu).max(st.tol_comp * T::lit(0.1));
+            self.newton_direction(qp, Rhs::Corrector(target));
+            let tau = T::lit(0.995);
+            let alpha = (tau * self.max_step(T::lit(1e30))).min(T::ONE);
+            self.take_step(alpha);
+        }
+        res = self.residuals(qp);
+        res[3] /= m_real;
+        let status = if res[0] <= st.tol_stat
+            && res[1] <= st.tol_eq
+            && res[2] <= st.tol_ineq
+            && res[3] <= st.tol_comp
+        {
+            QpStatus::Solved
+        } else {
+            QpStatus::MaxIterations
+        };
+        self.info(status, st.max_iter, res)
+    }
+
+    fn max_multiplier(&self) -> T {
+        let mut m = self.rxn.max_multiplier().max(self.rgn.max_multiplier());
+        for k in 0..N {
+            m = m
+                .max(self.rx[k].max_multiplier())
+                .max(self.ru[k].max_multiplier())
+                .max(self.rg[k].max_multiplier());
+        }
+        m
+    }
+
+    /// Computes all residuals and `H y + g`; returns
+    /// `[stationarity, dynamics, inequality, sum t lam]`. The stationarity residual is relative
+    /// to the largest of its terms (`H y + g`, `A'pi`, `B'pi`, `pi`, the bound multipliers)
+    /// when that exceeds 1: rounding makes it no smaller than about `eps` times that. The
+    /// others are absolute.
+    fn residuals(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N>) -> [T; 4] {
+        let (mut rs, mut re, mut ri, mut comp) = (T::ZERO, T::ZERO, T::ZERO, T::ZERO);
+        let mut gscale = T::ONE;
+        let max_abs = |v: &[T]| v.iter().fold(T::ZERO, |m, x| m.max(x.abs()));
+        for k in 0..N {
+            let s = &qp.stages[k];
+            let (x, u) = (self.sol.x[k], self.sol.u[k]);
+            let xnext = if k + 1 < N {
+                self.sol.x[k + 1]
+            } else {
+                self.sol.xn
+            };
+            self.rb[k] = s.a * x + s.b * u + s.f - xnext;
+            re = re.max(max_abs(self.rb[k].as_slice()));
+            self.hx[k] = s.q * x + s.s.transpose() * u + s.gx;
+            self.hu[k] = s.r * u + s.s * x + s.gu;
+            gscale = gscale.max(self.hu[k].amax());
+            if k > 0 {
+                gscale = gscale.max(self.hx[k].amax());
+            }
+            ri = ri
+                .max(self.rx[k].residuals(&x))
+                .max(self.ru[k].residuals(&u))
+                .max(self.rg[k].residuals(&(s.c * x + s.d * u)));
+            comp += self.rx[k].complementarity()
+                + self.ru[k].complementarity()
+                + self.rg[k].complementarity();
+            // Stationarity with the current multipliers, and the size of its terms.
+            let gd = self.rg[k].dual();
+            let bpi = s.b.transpose() * self.sol.pi[k];
+            let ud = self.ru[k].dual();
+            let dgd = s.d.transpose() * gd;
+            let su = self.hu[k] + bpi - ud - dgd;
+            rs = rs.max(max_abs(su.as_slice()));
+            gscale = gscale.max(bpi.amax()).max(ud.amax()).max(dgd.amax());
+            if k > 0 {
+                let api = s.a.transpose() * self.sol.pi[k];
+                let xd = self.rx[k].dual();
+                let cgd = s.c.transpose() * gd;
+                let sx = self.hx[k] + api - self.sol.pi[k - 1] - xd - cgd;
+                rs = rs.max(max_abs(sx.as_slice()));
+                gscale = gscale
+                    .max(api.amax())
+                    .max(self.sol.pi[k - 1].amax())
+                    .max(xd.amax())
+                    .max(cgd.amax());
+            }
+        }
+        let t = &qp.terminal;
+        let xn = self.sol.xn;
+        self.hxn = t.q * xn + t.gx;
+        gscale = gscale.max(self.hxn.amax());
+        ri = ri
+            .max(self.rxn.residuals(&xn))
+            .max(self.rgn.residuals(&(t.c * xn)));
+        comp += self.rxn.complementarity() + self.rgn.complementarity();
+        if N > 0 {
+            let (xd, cgd) = (self.rxn.dual(), t.c.transpose() * self.rgn.dual());
+            let sx = self.hxn - self.sol.pi[N - 1] - xd - cgd;
+            rs = rs.max(max_abs(sx.as_slice()));
+            gscale = gscale
+                .max(self.sol.pi[N - 1].amax())
+                .max(xd.amax())
+                .max(cgd.amax());
+        }
+        [rs / gscale, re, ri, comp]
+    }
+
+    /// Backward Riccati factorization of the Newton system's Hessian.
+    fn factorize(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N>) -> bool {
+        if N == 0 {
+            return true;
+        }
+        let t = &qp.terminal;
+        let sg = self.rgn.sigma();
+        let mut p = t.q
+            + Mat::<T, NX, NX>::from_diagonal(&self.rxn.sigma())
+            + t.c.transpose() * Mat::<T, NGN, NGN>::from_diagonal(&sg) * t.c;
+        for k in (0..N).rev() {
+            let s = &qp.stages[k];
+            self.pn[k] = p;
+            let sig_g = Mat::<T, NG, NG>::from_diagonal(&self.rg[k].sigma());
+            let dts = s.d.transpose() * sig_g;
+            let pa = p * s.a;
+            let pb = p * s.b;
+            let mut rbar = s.r
+                + Mat::<T, NU, NU>::from_diagonal(&self.ru[k].sigma())
+                + dts * s.d
+                + s.b.transpose() * pb;
+            let sbar = s.s + dts * s.c + s.b.transpose() * pa;
+            // Symmetrize, regularize, factorize; more regularization if it fails.
+            rbar = (rbar + rbar.transpose()) * T::lit(0.5);
+            let mut reg = self.settings.reg;
+            let mut chol = None;
+            for attempt in 0..4 {
+                let mut m = rbar;
+                for i in 0..NU {
+                    // First attempt: the plain regularization. Retries scale it with each
+                    // diagonal entry, which rescues the end game, where barrier terms of
+                    // active bounds dwarf everything else and rounding breaks definiteness.
+                    let d = m[(i, i)];
+                    m[(i, i)] = if attempt == 0 {
+                        d + reg
+                    } else {
+                        d + reg * d.abs().max(T::ONE)
+                    };
+                }
+                chol = nalgebra::Cholesky::new(m);
+                if chol.is_some() {
+                    break;
+                }
+                reg = (reg * T::lit(1e3)).max(T::EPSILON * T::lit(1e3));
+            }
+            let Some(chol) = chol else {
+                return false;
+            };
+            let kmat = -chol.solve(&sbar);
+            self.l[k] = chol.unpack();
+            self.sbar[k] = sbar;
+            self.kmat[k] = kmat;
+            if k > 0 {
+                let qt = s.q
+                    + Mat::<T, NX, NX>::from_diagonal(&self.rx[k].sigma())
+                    + s.c.transpose() * sig_g * s.c;
+                let pk = qt + s.a.transpose() * pa + sbar.transpose() * kmat;
+                p = (pk + pk.transpose()) * T::lit(0.5);
+            }
+            if !finite_mat(&self.kmat[k]) {
+                return false;
+            }
+        }
+        true
+    }
+
+    /// `x = (L L')^{-1} v` with the stored factor of stage `k`.
+    fn chol_solve(&self, k: usize, v: &Vect<T, NU>) -> Vect<T, NU> {
+        let l = &self.l[k];
+        let mut y = *v;
+        l.solve_lower_triangular_mut(&mut y);
+        l.tr_solve_lower_triangular_mut(&mut y);
+        y
+    }
+
+    /// Solves the Newton system for the given complementarity right-hand side and sets the
+    /// direction of every variable: reduced gradient, Riccati solve, `settings.refine` steps
+    /// of iterative refinement, then slack and multiplier directions.
+    fn newton_direction(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N>, rhs: Rhs<T>) {
+        if N == 0 {
+            return;
+        }
+        let t = &qp.terminal;
+        self.gnt = self.hxn + self.rxn.gradient(rhs) + t.c.transpose() * self.rgn.gradient(rhs);
+        for k in 0..N {
+            let s = &qp.stages[k];
+            let wg = self.rg[k].gradient(rhs);
+            self.gut[k] = self.hu[k] + self.ru[k].gradient(rhs) + s.d.transpose() * wg;
+            self.gxt[k] = self.hx[k] + self.rx[k].gradient(rhs) + s.c.transpose() * wg;
+            self.rbt[k] = self.rb[k];
+        }
+        self.gx0 = self.gxt;
+        self.gu0 = self.gut;
+        self.gn0 = self.gnt;
+        self.lq_solve(qp);
+        for _ in 0..self.settings.refine {
+            self.refine(qp);
+        }
+        for k in 0..N {
+            let s = &qp.stages[k];
+            let (dx, du) = (self.dx[k], self.du[k]);
+            self.rx[k].direction(&dx, rhs);
+            self.ru[k].direction(&du, rhs);
+            self.rg[k].direction(&(s.c * dx + s.d * du), rhs);
+        }
+        let dxn = self.dxn;
+        self.rxn.direction(&dxn, rhs);
+        self.rgn.direction(&(t.c * dxn), rhs);
+    }
+
+    /// Riccati solve of the linear-quadratic problem with gradients `gxt`, `gut`, `gnt`, and
+    /// dynamics residuals `rbt`, using the factorization of the last [`factorize`] call;
+    /// writes `dx`, `du`, `dxn` and `pi_new`.
+    fn lq_solve(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N>) {
+        let mut pv = self.gnt;
+        for k in (0..N).rev() {
+            let s = &qp.stages[k];
+            self.pvn[k] = pv;
+            let pb = self.pn[k] * self.rbt[k] + pv;
+            let rbar = self.gut[k] + s.b.transpose() * pb;
+            let kv = -self.chol_solve(k, &rbar);
+            self.kv[k] = kv;
+            if k > 0 {
+                pv = self.gxt[k] + s.a.transpose() * pb + self.sbar[k].transpose() * kv;
+            }
+        }
+        let mut dx = Vect::<T, NX>::zeros();
+        for k in 0..N {
+            let s = &qp.stages[k];
+            self.dx[k] = dx;
+            let du = self.kmat[k] * dx + self.kv[k];
+            self.du[k] = du;
+            let next = s.a * dx + s.b * du + self.rbt[k];
+            self.pi_new[k] = self.pn[k] * next + self.pvn[k];
+            dx = next;
+        }
+        self.dxn = dx;
+    }
+
+    /// One step of iterative refinement: the residual of the Newton system at the current
+    /// direction is computed from the stage data (not from the Riccati matrices, which lose
+    /// precision when barrier terms are large), and the correction is solved with the same
+    /// factorization.
+    fn refine(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N>) {
+        let t = &qp.terminal;
+        let (dx0, du0, dxn0, pi0) = (self.dx, self.du, self.dxn, self.pi_new);
+        // Residuals of H~ d + g~ + [A'; B'] pi_k - [pi_{k-1}; 0] and A dx + B du + rb - dx+.
+        for k in 0..N {
+            let s = &qp.stages[k];
+            let (dx, du) = (dx0[k], du0[k]);
+            let next = if k + 1 < N { dx0[k + 1] } else { dxn0 };
+            let wg = self.rg[k].sigma().component_mul(&(s.c * dx + s.d * du));
+            self.gut[k] = s.r * du
+                + s.s * dx
+                + self.ru[k].sigma().component_mul(&du)
+                + s.d.transpose() * wg
+                + self.gu0[k]
+                + s.b.transpose() * pi0[k];
+            if k > 0 {
+                self.gxt[k] = s.q * dx
+                    + s.s.transpose() * du
+                    + self.rx[k].sigma().component_mul(&dx)
+                    + s.c.transpose() * wg
+                    + self.gx0[k]
+                    + s.a.transpose() * pi0[k]
+                    - pi0[k - 1];
+            }
+            self.rbt[k] = s.a * dx + s.b * du + self.rb[k] - next;
+        }
+        let wgn = self.rgn.sigma().component_mul(&(t.c * dxn0));
+        self.gnt =
+            t.q * dxn0 + self.rxn.sigma().component_mul(&dxn0) + t.c.transpose() * wgn + self.gn0
+                - pi0[N - 1];
+        self.lq_solve(qp);
+        for k in 0..N {
+            self.dx[k] += dx0[k];
+            self.du[k] += du0[k];
+            self.pi_new[k] += pi0[k];
+        }
+        self.dxn += dxn0;
+    }
+
+    fn save_affine(&mut self) {
+        for k in 0..N {
+            self.rx[k].save_affine();
+            self.ru[k].save_affine();
+            self.rg[k].save_affine();
+        }
+        self.rxn.save_affine();
+        self.rgn.save_affine();
+    }
+
+    fn max_step(&self, mut alpha: T) -> T {
+        for k in 0..N {
+            alpha = self.rx[k].max_step(alpha);
+            alpha = self.ru[k].max_step(alpha);
+            alpha = self.rg[k].max_step(alpha);
+        }
+        alpha = self.rxn.max_step(alpha);
+        self.rgn.max_step(alpha)
+    }
+
+    fn complementarity_after(&self, alpha: T) -> T {
+        let mut s = self.rxn.complementarity_after(alpha) + self.rgn.complementarity_after(alpha);
+        for k in 0..N {
+            s += self.rx[k].complementarity_after(alpha)
+                + self.ru[k].complementarity_after(alpha)
+                + self.rg[k].complementarity_after(alpha);
+        }
+        s
+    }
+
+    fn take_step(&mut self, alpha: T) {
+        for k in 0..N {
+            if k > 0 {
+                self.sol.x[k] += self.dx[k] * alpha;
+            }
+            self.sol.u[k] += self.du[k] * alpha;
+            self.sol.pi[k] += (self.pi_new[k] - self.sol.pi[k]) * alpha;
+            self.rx[k].update(alpha);
+            self.ru[k].update(alpha);
+            self.rg[k].update(alpha);
+        }
+        self.sol.xn += self.dxn * alpha;
+        self.rxn.update(alpha);
+        self.rgn.update(alpha);
+    }
+}

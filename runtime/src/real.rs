@@ -1,0 +1,94 @@
+//! The scalar type of a solver: `f32` or `f64`.
+
+use nalgebra::RealField;
+
+/// A floating-point scalar the solver runs in. Implemented for `f32` and `f64`; math goes
+/// through `libm` (nalgebra's `libm` feature), so it works without `std`.
+pub trait Real: RealField + Copy + Default + PartialOrd {
+    /// 0
+    const ZERO: Self;
+    /// 1
+    const ONE: Self;
+    /// Machine epsilon.
+    const EPSILON: Self;
+    /// A large finite value standing for "no bound" (bounds beyond it are treated as absent).
+    const INF: Self;
+    /// `-INF`.
+    const NEG_INF: Self;
+    /// Default tolerance of the QP solver for this precision (stationarity and feasibility).
+    const DEFAULT_TOL: Self;
+    /// Default tolerance on the average complementarity. A bound with multiplier `lambda` ends
+    /// about `mu / lambda` from where it should be, so this is tighter than `DEFAULT_TOL`.
+    const DEFAULT_TOL_COMP: Self;
+    /// Default diagonal regularization of the Riccati factorization for this precision.
+    const DEFAULT_REG: Self;
+    /// Largest barrier weight `lam / t` the QP solver puts on a constraint row.
+    const SIGMA_MAX: Self;
+
+    /// Conversion from an `f64` literal (rounding for `f32`).
+    fn lit(v: f64) -> Self;
+    /// Conversion to `f64`.
+    fn to_f64(self) -> f64;
+    /// Whether the value is neither NaN nor infinite.
+    fn finite(self) -> bool;
+    /// Whether the value is NaN.
+    fn nan(self) -> bool;
+}
+
+impl Real for f64 {
+    const ZERO: Self = 0.0;
+    const ONE: Self = 1.0;
+    const EPSILON: Self = f64::EPSILON;
+    const INF: Self = 1e20;
+    const NEG_INF: Self = -1e20;
+    const DEFAULT_TOL: Self = 1e-8;
+    const DEFAULT_TOL_COMP: Self = 1e-10;
+    const DEFAULT_REG: Self = 1e-10;
+    const SIGMA_MAX: Self = 3e23;
+
+    #[inline]
+    fn lit(v: f64) -> Self {
+        v
+    }
+    #[inline]
+    fn to_f64(self) -> f64 {
+        self
+    }
+    #[inline]
+    fn finite(self) -> bool {
+        self.is_finite()
+    }
+    #[inline]
+    fn nan(self) -> bool {
+        self.is_nan()
+    }
+}
+
+impl Real for f32 {
+    const ZERO: Self = 0.0;
+    const ONE: Self = 1.0;
+    const EPSILON: Self = f32::EPSILON;
+    const INF: Self = 1e20;
+    const NEG_INF: Self = -1e20;
+    const DEFAULT_TOL: Self = 1e-5;
+    const DEFAULT_TOL_COMP: Self = 1e-6;
+    const DEFAULT_REG: Self = 1e-6;
+    const SIGMA_MAX: Self = 1e8;
+
+    #[inline]
+    fn lit(v: f64) -> Self {
+        v as f32
+    }
+    #[inline]
+    fn to_f64(self) -> f64 {
+        f64::from(self)
+    }
+    #[inline]
+    fn finite(self) -> bool {
+        self.is_finite()
+    }
+    #[inline]
+    fn nan(self) -> bool {
+        self.is_nan()
+    }
+}
