@@ -1,7 +1,8 @@
 //! # mpc-runtime
 //!
 //! The engine every mpcc-generated solver runs on: a structured OCP-QP interior-point solver
-//! with a Riccati recursion ([`qp`]) and, on top, the real-time-iteration SQP loop.
+//! with a Riccati recursion ([`qp`]) and, on top, the real-time-iteration SQP loop ([`rti`])
+//! over a [`Model`] that generated code implements.
 //!
 //! `#![no_std]`, no heap, no `unsafe`: every workspace is a struct of fixed-size arrays whose
 //! sizes are const generics, with a `const NEW` so it can live in a `static`. Linear algebra on
@@ -17,12 +18,17 @@
 
 use nalgebra::{ArrayStorage, SMatrix};
 
+pub mod model;
 pub mod qp;
 pub mod real;
 mod rows;
+pub mod rti;
 
+pub use model::Model;
+pub use nalgebra;
 pub use qp::{OcpQp, QpInfo, QpSettings, QpSolution, QpSolver, QpStage, QpStatus, QpTerminal};
 pub use real::Real;
+pub use rti::{Rti, RtiInfo, RtiSettings, RtiStatus, SetError};
 
 /// A zero matrix, usable in constants.
 pub(crate) const fn zeros<T: Real, const R: usize, const C: usize>() -> SMatrix<T, R, C> {

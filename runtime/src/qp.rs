@@ -189,7 +189,7 @@ impl<T: Real> QpSettings<T> {
         tol_comp: T::DEFAULT_TOL_COMP,
         reg: T::DEFAULT_REG,
         warm_start: false,
-        mu0: T::ONE,
+        mu0: T::DEFAULT_MU0,
         refine: 1,
     };
 }
@@ -311,6 +311,7 @@ pub struct QpSolver<
     dxn: Vect<T, NX>,
     du: [Vect<T, NU>; N],
     pi_new: [Vect<T, NX>; N],
+    last_alpha: T,
 }
 
 impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usize, const N: usize>
@@ -362,7 +363,13 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
         dxn: crate::zeros(),
         du: [crate::zeros(); N],
         pi_new: [crate::zeros(); N],
+        last_alpha: T::ZERO,
     };
+
+    /// Step length of the last interior-point iteration.
+    pub fn last_step_length(&self) -> T {
+        self.last_alpha
+    }
 
     /// The last solution (primal and dynamics multipliers).
     pub fn solution(&self) -> &QpSolution<T, NX, NU, N> {
@@ -522,9 +529,18 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
             // tolerance: driving slacks further down only buries them in rounding noise
             // (in f32 that breaks the iteration), and is not needed to stop.
             let target = (sigma * mu).max(st.tol_comp * T::lit(0.1));
-            self.newton_direction(qp, Rhs::Corrector(target));
+            // When the predictor is blocked almost at once, its second-order term is a poor
+            // prediction and can be huge; leaving it out (plain centering) stops the cycling
+            // Mehrotra's method is known for on such steps.
+            let weight = if alpha_aff < T::lit(0.1) {
+                T::ZERO
+            } else {
+                T::ONE
+            };
+            self.newton_direction(qp, Rhs::Corrector(target, weight));
             let tau = T::lit(0.995);
             let alpha = (tau * self.max_step(T::lit(1e30))).min(T::ONE);
+            self.last_alpha = alpha;
             self.take_step(alpha);
         }
         res = self.residuals(qp);

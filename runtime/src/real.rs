@@ -24,6 +24,10 @@ pub trait Real: RealField + Copy + Default + PartialOrd {
     const DEFAULT_REG: Self;
     /// Largest barrier weight `lam / t` the QP solver puts on a constraint row.
     const SIGMA_MAX: Self;
+    /// Default step tolerance of the full SQP.
+    const SQP_TOL: Self;
+    /// Default initial complementarity of the QP solver.
+    const DEFAULT_MU0: Self;
 
     /// Conversion from an `f64` literal (rounding for `f32`).
     fn lit(v: f64) -> Self;
@@ -45,6 +49,8 @@ impl Real for f64 {
     const DEFAULT_TOL_COMP: Self = 1e-10;
     const DEFAULT_REG: Self = 1e-10;
     const SIGMA_MAX: Self = 3e23;
+    const SQP_TOL: Self = 1e-6;
+    const DEFAULT_MU0: Self = 100.0;
 
     #[inline]
     fn lit(v: f64) -> Self {
@@ -74,6 +80,8 @@ impl Real for f32 {
     const DEFAULT_TOL_COMP: Self = 1e-6;
     const DEFAULT_REG: Self = 1e-6;
     const SIGMA_MAX: Self = 1e8;
+    const SQP_TOL: Self = 1e-4;
+    const DEFAULT_MU0: Self = 100.0;
 
     #[inline]
     fn lit(v: f64) -> Self {

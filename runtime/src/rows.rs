@@ -14,8 +14,9 @@ use crate::real::Real;
 pub(crate) enum Rhs<T> {
     /// Predictor: `t lam`.
     Affine,
-    /// Mehrotra corrector: `t lam + dt_aff dlam_aff - sigma mu`.
-    Corrector(T),
+    /// Mehrotra corrector: `t lam + w dt_aff dlam_aff - sigma mu` with target `sigma mu` and
+    /// weight `w` of the second-order term.
+    Corrector(T, T),
 }
 
 /// Rows of one kind at one stage.
@@ -189,9 +190,9 @@ impl<T: Real, const K: usize> Rows<T, K> {
         let (cl, cu) = (self.tl[i] * self.ll[i], self.tu[i] * self.lu[i]);
         match rhs {
             Rhs::Affine => (cl, cu),
-            Rhs::Corrector(target) => (
-                cl + self.atl[i] * self.all[i] - target,
-                cu + self.atu[i] * self.alu[i] - target,
+            Rhs::Corrector(target, w) => (
+                cl + w * self.atl[i] * self.all[i] - target,
+                cu + w * self.atu[i] * self.alu[i] - target,
             ),
         }
     }

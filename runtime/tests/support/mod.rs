@@ -3,6 +3,8 @@
 
 #![allow(dead_code)]
 
+pub mod quadrotor;
+
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{
     DefaultSettingsBuilder, DefaultSolver, IPSolver, SolverStatus, SupportedConeT,

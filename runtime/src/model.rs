@@ -1,0 +1,81 @@
+//! The interface generated model code implements.
+
+use nalgebra::{SMatrix, SVector};
+
+use crate::real::Real;
+
+/// A discrete-time optimal control model with a least-squares cost, evaluated stage by stage.
+///
+/// Dimensions are const generics: `NX` states, `NU` controls, `NP` runtime parameters per
+/// stage, `NY` stage residuals, `NYN` terminal residuals, `NG` general stage constraints,
+/// `NGN` general terminal constraints. The cost is
+/// `sum_k 1/2 |y(x_k, u_k, p_k) - yref_k|^2_W + 1/2 |y_N(x_N, p_N) - yref_N|^2_{W_N}`
+/// (Gauss-Newton Hessian `J'WJ`), subject to `x_{k+1} = F(x_k, u_k, p_k)`, box bounds on `x`
+/// and `u` and `lg <= h(x, u, p) <= ug`.
+///
+/// Every method writes its Jacobians into the given matrices and returns the value; none may
+/// allocate or panic.
+pub trait Model<
+    T: Real,
+    const NX: usize,
+    const NU: usize,
+    const NP: usize,
+    const NY: usize,
+    const NYN: usize,
+    const NG: usize,
+    const NGN: usize,
+>
+{
+    /// `F(x, u, p)` with `A = dF/dx` and `B = dF/du`.
+    fn dynamics(
+        &self,
+        x: &SVector<T, NX>,
+        u: &SVector<T, NU>,
+        p: &SVector<T, NP>,
+        a: &mut SMatrix<T, NX, NX>,
+        b: &mut SMatrix<T, NX, NU>,
+    ) -> SVector<T, NX>;
+
+    /// Stage residual `y(x, u, p)` with its Jacobians.
+    fn residual(
+        &self,
+        x: &SVector<T, NX>,
+        u: &SVector<T, NU>,
+        p: &SVector<T, NP>,
+        jx: &mut SMatrix<T, NY, NX>,
+        ju: &mut SMatrix<T, NY, NU>,
+    ) -> SVector<T, NY>;
+
+    /// Terminal residual `y_N(x, p)` with its Jacobian.
+    fn terminal_residual(
+        &self,
+        x: &SVector<T, NX>,
+        p: &SVector<T, NP>,
+        jx: &mut SMatrix<T, NYN, NX>,
+    ) -> SVector<T, NYN>;
+
+    /// General stage constraints `h(x, u, p)` with their Jacobians (none by default).
+    fn constraints(
+        &self,
+        _x: &SVector<T, NX>,
+        _u: &SVector<T, NU>,
+        _p: &SVector<T, NP>,
+        cx: &mut SMatrix<T, NG, NX>,
+        cu: &mut SMatrix<T, NG, NU>,
+    ) -> SVector<T, NG> {
+        cx.fill(T::ZERO);
+        cu.fill(T::ZERO);
+        SVector::zeros()
+    }
+
+    /// General terminal constraints `h_N(x, p)` with their Jacobian (none by default).
+    fn terminal_constraints(
+        &self,
+        _x: &SVector<T, NX>,
+        _p: &SVector<T, NP>,
+        cx: &mut SMatrix<T, NGN, NX>,
+    ) -> SVector<T, NGN> {
+        cx.fill(T::ZERO);
+        SVector::zeros()
+    }
+}

@@ -1,0 +1,591 @@
+//! The real-time-iteration SQP solver (Gauss-Newton), and a full-SQP mode with a merit line
+//! search for offline use.
+//!
+//! Each control step is [`Rti::prepare`] (before the state arrives: linearize every stage
+//! around the current trajectory) and [`Rti::feedback`] (embed the measured state, solve one
+//! QP, update the trajectory, return `u_0`). If the QP fails, the previous successful plan,
+//! shifted by the number of steps since, is returned and the status says so; a non-finite
+//! control is never returned, and non-finite inputs are rejected before they touch any state.
+
+use nalgebra::{SMatrix, SVector};
+
+use crate::model::Model;
+use crate::qp::{OcpQp, QpInfo, QpSettings, QpSolver, QpStatus};
+use crate::real::Real;
+
+/// Step halvings of the full-SQP line search.
+const MAX_HALVINGS: u32 = 12;
+
+/// Settings of the SQP layer.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RtiSettings<T> {
+    /// Settings of every QP solve.
+    pub qp: QpSettings<T>,
+    /// Shift the trajectory by one stage before each preparation (the last stage is repeated).
+    /// Off, the previous solution is the next linearization point as it is.
+    pub shift: bool,
+    /// Iteration limit of [`Rti::solve_sqp`].
+    pub sqp_max_iter: u32,
+    /// [`Rti::solve_sqp`] stops when the largest step entry is below this.
+    pub sqp_tol: T,
+}
+
+impl<T: Real> RtiSettings<T> {
+    /// Defaults: QP defaults, no shift, 50 SQP iterations to `1e-6` (f64) / `1e-4` (f32).
+    pub const DEFAULT: Self = RtiSettings {
+        qp: QpSettings::DEFAULT,
+        shift: false,
+        sqp_max_iter: 50,
+        sqp_tol: T::SQP_TOL,
+    };
+}
+
+/// Outcome of a control step or a full SQP solve.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(C)]
+pub enum RtiStatus {
+    /// The QP was solved; the control comes from the new solution.
+    Ok = 0,
+    /// The QP failed (see [`RtiInfo::qp`]); the control comes from the previous plan.
+    UsedPreviousPlan = 1,
+    /// An input was NaN or infinite; nothing was changed.
+    NonFiniteInput = 2,
+    /// [`Rti::feedback`] was called without a [`Rti::prepare`] since the last feedback.
+    NotPrepared = 3,
+    /// The full SQP reached its iteration limit.
+    MaxIterations = 4,
+}
+
+/// Status and statistics of the last call.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RtiInfo<T> {
+    /// How the call ended.
+    pub status: RtiStatus,
+    /// The last QP solve.
+    pub qp: QpInfo<T>,
+    /// SQP iterations (1 for a real-time iteration).
+    pub sqp_iterations: u32,
+}
+
+/// Why a setter refused its input.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SetError {
+    /// A value was NaN or infinite (infinite bounds are allowed).
+    NonFinite,
+    /// The stage index is beyond the horizon.
+    StageOutOfRange,
+    /// A lower bound exceeds its upper bound.
+    CrossedBounds,
+}
+
+/// A real-time-iteration NMPC solver for model `M` with horizon `N`.
+#[derive(Clone, Debug)]
+pub struct Rti<
+    T: Real,
+    M,
+    const NX: usize,
+    const NU: usize,
+    const NP: usize,
+    const NY: usize,
+    const NYN: usize,
+    const NG: usize,
+    const NGN: usize,
+    const N: usize,
+> {
+    /// The model.
+    pub model: M,
+    /// Settings.
+    pub settings: RtiSettings<T>,
+    qp: OcpQp<T, NX, NU, NG, NGN, N>,
+    solver: QpSolver<T, NX, NU, NG, NGN, N>,
+    x: [SVector<T, NX>; N],
+    xn: SVector<T, NX>,
+    u: [SVector<T, NU>; N],
+    p: [SVector<T, NP>; N],
+    pn: SVector<T, NP>,
+    yref: [SVector<T, NY>; N],
+    yref_n: SVector<T, NYN>,
+    w: SMatrix<T, NY, NY>,
+    wn: SMatrix<T, NYN, NYN>,
+    lbx: SVector<T, NX>,
+    ubx: SVector<T, NX>,
+    lbu: SVector<T, NU>,
+    ubu: SVector<T, NU>,
+    lg: SVector<T, NG>,
+    ug: SVector<T, NG>,
+    lgn: SVector<T, NGN>,
+    ugn: SVector<T, NGN>,
+    plan: [SVector<T, NU>; N],
+    plan_age: usize,
+    prepared: bool,
+    /// A feedback has moved time forward since the last shift.
+    pending_shift: bool,
+    // Trial trajectory of the line search.
+    xt: [SVector<T, NX>; N],
+    xnt: SVector<T, NX>,
+    ut: [SVector<T, NU>; N],
+}
+
+fn all_finite<T: Real, const R: usize, const C: usize>(m: &SMatrix<T, R, C>) -> bool {
+    m.iter().all(|v| v.finite())
+}
+
+fn no_nan<T: Real, const R: usize>(v: &SVector<T, R>) -> bool {
+    !v.iter().any(|x| x.nan())
+}
+
+fn not_crossed<T: Real, const R: usize>(lo: &SVector<T, R>, hi: &SVector<T, R>) -> bool {
+    lo.iter().zip(hi.iter()).all(|(l, h)| l <= h)
+}
+
+impl<
+    T: Real,
+    M: Model<T, NX, NU, NP, NY, NYN, NG, NGN>,
+    const NX: usize,
+    const NU: usize,
+    const NP: usize,
+    const NY: usize,
+    const NYN: usize,
+    const NG: usize,
+    const NGN: usize,
+    const N: usize,
+> Rti<T, M, NX, NU, NP, NY, NYN, NG, NGN, N>
+{
+    /// A solver with zero trajectory, parameters, references and weights and no bounds.
+    /// `const`, so it can initialize a `static`.
+    pub const fn new(model: M) -> Self {
+        Rti {
+            model,
+            settings: RtiSettings::DEFAULT,
+            qp: OcpQp::NEW,
+            solver: QpSolver::NEW,
+            x: [crate::zeros(); N],
+            xn: crate::zeros(),
+            u: [crate::zeros(); N],
+            p: [crate::zeros(); N],
+            pn: crate::zeros(),
+            yref: [crate::zeros(); N],
+            yref_n: crate::zeros(),
+            w: crate::zeros(),
+            wn: crate::zeros(),
+            lbx: crate::filled(T::NEG_INF),
+            ubx: crate::filled(T::INF),
+            lbu: crate::filled(T::NEG_INF),
+            ubu: crate::filled(T::INF),
+            lg: crate::filled(T::NEG_INF),
+            ug: crate::filled(T::INF),
+            lgn: crate::filled(T::NEG_INF),
+            ugn: crate::filled(T::INF),
+            plan: [crate::zeros(); N],
+            plan_age: 0,
+            prepared: false,
+            pending_shift: false,
+            xt: [crate::zeros(); N],
+            xnt: crate::zeros(),
+            ut: [crate::zeros(); N],
+        }
+    }
+
+    /// Sets the stage weight `W` and terminal weight `W_N`.
+    ///
+    /// # Errors
+    /// [`SetError::NonFinite`] if an entry is NaN or infinite.
+    pub fn set_weights(
+        &mut self,
+        w: &SMatrix<T, NY, NY>,
+        wn: &SMatrix<T, NYN, NYN>,
+    ) -> Result<(), SetError> {
+        if !(all_finite(w) && all_finite(wn)) {
+            return Err(SetError::NonFinite);
+        }
+        self.w = *w;
+        self.wn = *wn;
+        Ok(())
+    }
+
+    /// Sets the residual reference of stage `k < N`.
+    ///
+    /// # Errors
+    /// [`SetError::NonFinite`], [`SetError::StageOutOfRange`].
+    pub fn set_reference(&mut self, k: usize, yref: &SVector<T, NY>) -> Result<(), SetError> {
+        if !all_finite(yref) {
+            return Err(SetError::NonFinite);
+        }
+        *self.yref.get_mut(k).ok_or(SetError::StageOutOfRange)? = *yref;
+        Ok(())
+    }
+
+    /// Sets the terminal residual reference.
+    ///
+    /// # Errors
+    /// [`SetError::NonFinite`].
+    pub fn set_terminal_reference(&mut self, yref: &SVector<T, NYN>) -> Result<(), SetError> {
+        if !all_finite(yref) {
+            return Err(SetError::NonFinite);
+        }
+        self.yref_n = *yref;
+        Ok(())
+    }
+
+    /// Sets the parameters of stage `k <= N` (`k = N` is the terminal stage).
+    ///
+    /// # Errors
+    /// [`SetError::NonFinite`], [`SetError::StageOutOfRange`].
+    pub fn set_param(&mut self, k: usize, p: &SVector<T, NP>) -> Result<(), SetError> {
+        if !all_finite(p) {
+            return Err(SetError::NonFinite);
+        }
+        if k == N {
+            self.pn = *p;
+        } else {
+            *self.p.get_mut(k).ok_or(SetError::StageOutOfRange)? = *p;
+        }
+        Ok(())
+    }
+
+    /// Sets the parameters of every stage.
+    ///
+    /// # Errors
+    /// [`SetError::NonFinite`].
+    pub fn set_param_all(&mut self, p: &SVector<T, NP>) -> Result<(), SetError> {
+        if !all_finite(p) {
+            return Err(SetError::NonFinite);
+        }
+        self.p = [*p; N];
+        self.pn = *p;
+        Ok(())
+    }
+
+    /// Sets box bounds on the state (stages `1..=N`) and the control (stages `0..N`).
+    /// Bounds at or beyond `Real::INF` in magnitude (or infinite) are absent.
+    ///
+    /// # Errors
+    /// [`SetError::NonFinite`] for NaN, [`SetError::CrossedBounds`].
+    pub fn set_bounds(
+        &mut self,
+        lbx: &SVector<T, NX>,
+        ubx: &SVector<T, NX>,
+        lbu: &SVector<T, NU>,
+        ubu: &SVector<T, NU>,
+    ) -> Result<(), SetError> {
+        if !(no_nan(lbx) && no_nan(ubx) && no_nan(lbu) && no_nan(ubu)) {
+            return Err(SetError::NonFinite);
+        }
+        if !(not_crossed(lbx, ubx) && not_crossed(lbu, ubu)) {
+            return Err(SetError::CrossedBounds);
+        }
+        self.lbx = *lbx;
+        self.ubx = *ubx;
+        self.lbu = *lbu;
+        self.ubu = *ubu;
+        Ok(())
+    }
+
+    /// Sets the bounds of the general constraints (stage and terminal).
+    ///
+    /// # Errors
+    /// [`SetError::NonFinite`] for NaN, [`SetError::CrossedBounds`].
+    pub fn set_constraint_bounds(
+        &mut self,
+        lg: &SVector<T, NG>,
+        ug: &SVector<T, NG>,
+        lgn: &SVector<T, NGN>,
+        ugn: &SVector<T, NGN>,
+    ) -> Result<(), SetError> {
+        if !(no_nan(lg) && no_nan(ug) && no_nan(lgn) && no_nan(ugn)) {
+            return Err(SetError::NonFinite);
+        }
+        if !(not_crossed(lg, ug) && not_crossed(lgn, ugn)) {
+            return Err(SetError::CrossedBounds);
+        }
+        self.lg = *lg;
+        self.ug = *ug;
+        self.lgn = *lgn;
+        self.ugn = *ugn;
+        Ok(())
+    }
+
+    /// Sets the whole trajectory guess: `x_k` for every `k <= N` and `u_k` for every `k < N`.
+    ///
+    /// # Errors
+    /// [`SetError::NonFinite`].
+    pub fn set_guess(&mut self, x: &SVector<T, NX>, u: &SVector<T, NU>) -> Result<(), SetError> {
+        if !(all_finite(x) && all_finite(u)) {
+            return Err(SetError::NonFinite);
+        }
+        self.x = [*x; N];
+        self.xn = *x;
+        self.u = [*u; N];
+        self.plan = [*u; N];
+        Ok(())
+    }
+
+    /// State `k <= N` of the current trajectory.
+    pub fn state(&self, k: usize) -> Option<&SVector<T, NX>> {
+        if k == N {
+            Some(&self.xn)
+        } else {
+            self.x.get(k)
+        }
+    }
+
+    /// Control `k < N` of the current trajectory.
+    pub fn control(&self, k: usize) -> Option<&SVector<T, NU>> {
+        self.u.get(k)
+    }
+
+    /// Shifts the trajectory one stage forward, repeating the last stage.
+    fn shift(&mut self) {
+        if N == 0 {
+            return;
+        }
+        for k in 0..N - 1 {
+            self.x[k] = self.x[k + 1];
+            self.u[k] = self.u[k + 1];
+        }
+        self.x[N - 1] = self.xn;
+    }
+
+    /// Preparation phase: linearizes dynamics, cost and constraints of every stage around the
+    /// current trajectory (after shifting it by one stage if `settings.shift` and a feedback
+    /// has happened since the last preparation). Call it before the state measurement arrives;
+    /// calling it again without a feedback in between only re-linearizes.
+    pub fn prepare(&mut self) {
+        if self.settings.shift && self.pending_shift {
+            self.shift();
+        }
+        self.pending_shift = false;
+        self.linearize();
+        self.prepared = true;
+    }
+
+    fn linearize(&mut self) {
+        let (w, wn) = (self.w, self.wn);
+        for k in 0..N {
+            let (x, u, p) = (self.x[k], self.u[k], self.p[k]);
+            let next = if k + 1 < N { self.x[k + 1] } else { self.xn };
+            let s = &mut self.qp.stages[k];
+            let fx = self.model.dynamics(&x, &u, &p, &mut s.a, &mut s.b);
+            s.f = fx - next;
+            let mut jx = SMatrix::<T, NY, NX>::zeros();
+            let mut ju = SMatrix::<T, NY, NU>::zeros();
+            let r = self.model.residual(&x, &u, &p, &mut jx, &mut ju) - self.yref[k];
+            let wjx = w * jx;
+            let wju = w * ju;
+            s.q = jx.transpose() * wjx;
+            s.s = ju.transpose() * wjx;
+            s.r = ju.transpose() * wju;
+            let wr = w * r;
+            s.gx = jx.transpose() * wr;
+            s.gu = ju.transpose() * wr;
+            s.lbx = self.lbx - x;
+            s.ubx = self.ubx - x;
+            s.lbu = self.lbu - u;
+            s.ubu = self.ubu - u;
+            let h = self.model.constraints(&x, &u, &p, &mut s.c, &mut s.d);
+            s.lg = self.lg - h;
+            s.ug = self.ug - h;
+        }
+        let (xn, pn) = (self.xn, self.pn);
+        let t = &mut self.qp.terminal;
+        let mut jx = SMatrix::<T, NYN, NX>::zeros();
+        let r = self.model.terminal_residual(&xn, &pn, &mut jx) - self.yref_n;
+        let wjx = wn * jx;
+        t.q = jx.transpose() * wjx;
+        t.gx = jx.transpose() * (wn * r);
+        t.lbx = self.lbx - xn;
+        t.ubx = self.ubx - xn;
+        let h = self.model.terminal_constraints(&xn, &pn, &mut t.c);
+        t.lg = self.lgn - h;
+        t.ug = self.ugn - h;
+    }
+
+    /// Feedback phase: embeds the measured state, solves the QP prepared by
+    /// [`prepare`](Self::prepare), takes the full step and returns the control to apply.
+    ///
+    /// With a non-finite `x0` nothing changes and the status is `NonFiniteInput` (the
+    /// returned control is then the next one of the current plan).
+    pub fn feedback(&mut self, x0: &SVector<T, NX>) -> (SVector<T, NU>, RtiInfo<T>) {
+        let fallback = self.fallback_control();
+        let empty = QpInfo {
+            status: QpStatus::NonFiniteInput,
+            iterations: 0,
+            res_stat: T::ZERO,
+            res_eq: T::ZERO,
+            res_ineq: T::ZERO,
+            mu: T::ZERO,
+        };
+        if !all_finite(x0) {
+            return (fallback, self.info(RtiStatus::NonFiniteInput, empty, 0));
+        }
+        if !self.prepared {
+            return (fallback, self.info(RtiStatus::NotPrepared, empty, 0));
+        }
+        self.prepared = false;
+        let x_lin0 = self.x.first().copied().unwrap_or(*x0);
+        self.qp.x0 = x0 - x_lin0;
+        self.solver.settings = self.settings.qp;
+        let qp_info = self.solver.solve(&self.qp);
+        if qp_info.status == QpStatus::Solved && self.step_is_finite() {
+            self.apply_step(T::ONE);
+            if let Some(x) = self.x.first_mut() {
+                *x = *x0;
+            }
+            self.plan = self.u;
+            self.plan_age = 0;
+            self.pending_shift = true;
+            let u0 = self.u.first().copied().unwrap_or(fallback);
+            (u0, self.info(RtiStatus::Ok, qp_info, 1))
+        } else {
+            // The paper's fallback: keep the last good plan and move along it.
+            self.plan_age = (self.plan_age + 1).min(N.saturating_sub(1));
+            let u = self.fallback_control();
+            self.pending_shift = true;
+            (u, self.info(RtiStatus::UsedPreviousPlan, qp_info, 1))
+        }
+    }
+
+    fn info(&self, status: RtiStatus, qp: QpInfo<T>, sqp_iterations: u32) -> RtiInfo<T> {
+        RtiInfo {
+            status,
+            qp,
+            sqp_iterations,
+        }
+    }
+
+    /// The control of the current plan at its age (the first control if no QP has succeeded
+    /// yet). Always finite: every stored control came from a finite, checked solution or a
+    /// checked guess.
+    fn fallback_control(&self) -> SVector<T, NU> {
+        self.plan
+            .get(self.plan_age)
+            .or(self.plan.last())
+            .copied()
+            .unwrap_or_else(SVector::zeros)
+    }
+
+    fn step_is_finite(&self) -> bool {
+        let sol = self.solver.solution();
+        sol.x.iter().all(all_finite) && sol.u.iter().all(all_finite) && all_finite(&sol.xn)
+    }
+
+    /// `trajectory += alpha * step` of the last QP solution.
+    fn apply_step(&mut self, alpha: T) {
+        let sol = self.solver.solution();
+        for k in 0..N {
+            self.x[k] += sol.x[k] * alpha;
+            self.u[k] += sol.u[k] * alpha;
+        }
+        self.xn += sol.xn * alpha;
+    }
+
+    fn restore_trial(&mut self) {
+        self.x = self.xt;
+        self.u = self.ut;
+        self.xn = self.xnt;
+    }
+
+    /// Merit function `cost + nu * (sum |dynamics defect|_1)` at the current trajectory.
+    fn merit(&self, nu: T) -> T {
+        let mut cost = T::ZERO;
+        let mut defect = T::ZERO;
+        let mut a = SMatrix::<T, NX, NX>::zeros();
+        let mut b = SMatrix::<T, NX, NU>::zeros();
+        let mut jx = SMatrix::<T, NY, NX>::zeros();
+        let mut ju = SMatrix::<T, NY, NU>::zeros();
+        for k in 0..N {
+            let (x, u, p) = (&self.x[k], &self.u[k], &self.p[k]);
+            let next = if k + 1 < N { &self.x[k + 1] } else { &self.xn };
+            let r = self.model.residual(x, u, p, &mut jx, &mut ju) - self.yref[k];
+            cost += (r.transpose() * self.w * r)[(0, 0)] * T::lit(0.5);
+            let d = self.model.dynamics(x, u, p, &mut a, &mut b) - next;
+            defect += d.abs().sum();
+        }
+        let mut jn = SMatrix::<T, NYN, NX>::zeros();
+        let r = self.model.terminal_residual(&self.xn, &self.pn, &mut jn) - self.yref_n;
+        cost += (r.transpose() * self.wn * r)[(0, 0)] * T::lit(0.5);
+        cost + nu * defect
+    }
+
+    /// Full SQP from the current trajectory with `x_0` fixed to `x0`: Gauss-Newton steps with a
+    /// line search on an exact L1 merit function (`cost + nu |dynamics defects|_1`, `nu` twice
+    /// the largest dynamics multiplier), until the largest entry of the QP step is below
+    /// `settings.sqp_tol` or `settings.sqp_max_iter` iterations. For offline planning and
+    /// tests. The trajectory is left at the last accepted iterate.
+    pub fn solve_sqp(&mut self, x0: &SVector<T, NX>) -> RtiInfo<T> {
+        let empty = QpInfo {
+            status: QpStatus::NonFiniteInput,
+            iterations: 0,
+            res_stat: T::ZERO,
+            res_eq: T::ZERO,
+            res_ineq: T::ZERO,
+            mu: T::ZERO,
+        };
+        if !all_finite(x0) {
+            return self.info(RtiStatus::NonFiniteInput, empty, 0);
+        }
+        let mut last = empty;
+        for it in 0..self.settings.sqp_max_iter {
+            self.linearize();
+            let x_lin0 = self.x.first().copied().unwrap_or(*x0);
+            self.qp.x0 = x0 - x_lin0;
+            self.solver.settings = self.settings.qp;
+            last = self.solver.solve(&self.qp);
+            if last.status != QpStatus::Solved || !self.step_is_finite() {
+                return self.info(RtiStatus::UsedPreviousPlan, last, it + 1);
+            }
+            let sol = self.solver.solution();
+            let mut step = sol.xn.amax();
+            let mut nu = T::ONE;
+            for k in 0..N {
+                step = step.max(sol.x[k].amax()).max(sol.u[k].amax());
+                nu = nu.max(sol.pi[k].amax() * T::lit(2.0));
+            }
+            // The first state is pinned to x0 exactly; the line search moves the rest.
+            if let Some(x) = self.x.first_mut() {
+                *x = *x0;
+            }
+            let phi0 = self.merit(nu);
+            self.xt = self.x;
+            self.ut = self.u;
+            self.xnt = self.xn;
+            // Backtracking that keeps halving while the merit keeps improving: it takes the
+            // full step where that is best and damps the overshoot of Gauss-Newton steps that
+            // oscillate (a plain Armijo test accepts those and converges slowly).
+            let mut best = (T::ZERO, phi0);
+            let mut alpha = T::ONE;
+            for _ in 0..MAX_HALVINGS {
+                self.restore_trial();
+                self.apply_step(alpha);
+                if let Some(x) = self.x.first_mut() {
+                    *x = *x0;
+                }
+                let phi = self.merit(nu);
+                if phi.finite() && phi < best.1 {
+                    best = (alpha, phi);
+                } else if best.0 > T::ZERO {
+                    break;
+                }
+                alpha *= T::lit(0.5);
+            }
+            // No improvement at all (converged to rounding, or a poor direction): take the
+            // smallest step tried, so the iteration cannot stall on a stale linearization.
+            let alpha = if best.0 > T::ZERO {
+                best.0
+            } else {
+                alpha * T::lit(2.0)
+            };
+            self.restore_trial();
+            self.apply_step(alpha);
+            if let Some(x) = self.x.first_mut() {
+                *x = *x0;
+            }
+            if step <= self.settings.sqp_tol {
+                self.plan = self.u;
+                self.plan_age = 0;
+                return self.info(RtiStatus::Ok, last, it + 1);
+            }
+        }
+        self.info(RtiStatus::MaxIterations, last, self.settings.sqp_max_iter)
+    }
+}

@@ -1,0 +1,251 @@
+//! Failure handling of the RTI solver: non-finite inputs leave no trace, a failing QP returns
+//! the previous plan shifted, and no step allocates.
+
+mod support;
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+
+use mpc_runtime::{Model, Real, Rti, RtiStatus, SetError};
+use nalgebra::{SMatrix, SVector};
+
+/// Counts allocations made on the thread that armed it (other test threads do not count).
+struct Counting;
+static ARMED: AtomicBool = AtomicBool::new(false);
+static COUNT: AtomicUsize = AtomicUsize::new(0);
+thread_local! {
+    static MINE: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+// SAFETY: forwards every call to `System` unchanged; only counts.
+#[allow(unsafe_code)]
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        if ARMED.load(Ordering::Relaxed) && MINE.with(|m| m.get()) {
+            COUNT.fetch_add(1, Ordering::Relaxed);
+        }
+        // SAFETY: same contract as the caller's.
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        // SAFETY: same contract as the caller's.
+        unsafe { System.dealloc(ptr, layout) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+fn count_allocations<R>(f: impl FnOnce() -> R) -> (R, usize) {
+    MINE.with(|m| m.set(true));
+    COUNT.store(0, Ordering::Relaxed);
+    ARMED.store(true, Ordering::Relaxed);
+    let r = f();
+    ARMED.store(false, Ordering::Relaxed);
+    MINE.with(|m| m.set(false));
+    (r, COUNT.load(Ordering::Relaxed))
+}
+
+/// Double integrator `x = (p, v)`, `u = a`, exact discretization; y = (x, u); a general
+/// constraint `p + v` (for the infeasibility test).
+#[derive(Clone, Copy, Debug)]
+struct DoubleIntegrator {
+    dt: f64,
+}
+
+impl<T: Real> Model<T, 2, 1, 0, 3, 2, 1, 0> for DoubleIntegrator {
+    fn dynamics(
+        &self,
+        x: &SVector<T, 2>,
+        u: &SVector<T, 1>,
+        _p: &SVector<T, 0>,
+        a: &mut SMatrix<T, 2, 2>,
+        b: &mut SMatrix<T, 2, 1>,
+    ) -> SVector<T, 2> {
+        let h = T::lit(self.dt);
+        *a = SMatrix::from_row_slice(&[T::ONE, h, T::ZERO, T::ONE]);
+        *b = SMatrix::from_column_slice(&[h * h * T::lit(0.5), h]);
+        *a * x + *b * u
+    }
+    fn residual(
+        &self,
+        x: &SVector<T, 2>,
+        u: &SVector<T, 1>,
+        _p: &SVector<T, 0>,
+        jx: &mut SMatrix<T, 3, 2>,
+        ju: &mut SMatrix<T, 3, 1>,
+    ) -> SVector<T, 3> {
+        *jx = SMatrix::from_row_slice(&[T::ONE, T::ZERO, T::ZERO, T::ONE, T::ZERO, T::ZERO]);
+        *ju = SMatrix::from_column_slice(&[T::ZERO, T::ZERO, T::ONE]);
+        SVector::from_column_slice(&[x[0], x[1], u[0]])
+    }
+    fn terminal_residual(
+        &self,
+        x: &SVector<T, 2>,
+        _p: &SVector<T, 0>,
+        jx: &mut SMatrix<T, 2, 2>,
+    ) -> SVector<T, 2> {
+        *jx = SMatrix::identity();
+        *x
+    }
+    fn constraints(
+        &self,
+        x: &SVector<T, 2>,
+        _u: &SVector<T, 1>,
+        _p: &SVector<T, 0>,
+        cx: &mut SMatrix<T, 1, 2>,
+        cu: &mut SMatrix<T, 1, 1>,
+    ) -> SVector<T, 1> {
+        *cx = SMatrix::from_row_slice(&[T::ONE, T::ONE]);
+        *cu = SMatrix::zeros();
+        SVector::from_column_slice(&[x[0] + x[1]])
+    }
+}
+
+type Di = Rti<f64, DoubleIntegrator, 2, 1, 0, 3, 2, 1, 0, 15>;
+
+fn di() -> Box<Di> {
+    let mut s = Box::new(Di::new(DoubleIntegrator { dt: 0.1 }));
+    let w = SMatrix::<f64, 3, 3>::from_diagonal(&SVector::from([10.0, 1.0, 0.1]));
+    s.set_weights(&w, &(SMatrix::identity() * 10.0)).unwrap();
+    s.set_bounds(
+        &SVector::repeat(f64::NEG_INFINITY),
+        &SVector::repeat(f64::INFINITY),
+        &SVector::from([-1.0]),
+        &SVector::from([1.0]),
+    )
+    .unwrap();
+    s.settings.shift = true;
+    s
+}
+
+fn step(s: &mut Di, x: &SVector<f64, 2>) -> SVector<f64, 2> {
+    s.prepare();
+    let (u, info) = s.feedback(x);
+    assert_eq!(info.status, RtiStatus::Ok);
+    let mut a = SMatrix::zeros();
+    let mut b = SMatrix::zeros();
+    <DoubleIntegrator as Model<f64, 2, 1, 0, 3, 2, 1, 0>>::dynamics(
+        &s.model,
+        x,
+        &u,
+        &SVector::zeros(),
+        &mut a,
+        &mut b,
+    )
+}
+
+#[test]
+fn non_finite_inputs_are_rejected_and_leave_no_trace() {
+    let mut clean = di();
+    let mut dirty = di();
+    let mut x = SVector::from([2.0, 0.0]);
+    let mut xd = x;
+    for k in 0..20 {
+        if k == 7 {
+            // A bad measurement, a bad reference, bad weights, bad bounds: all refused.
+            dirty.prepare();
+            let (u, info) = dirty.feedback(&SVector::from([f64::NAN, 0.0]));
+            assert_eq!(info.status, RtiStatus::NonFiniteInput);
+            assert!(u.iter().all(|v| v.is_finite()));
+            assert_eq!(
+                dirty.set_reference(3, &SVector::from([f64::INFINITY, 0.0, 0.0])),
+                Err(SetError::NonFinite)
+            );
+            assert_eq!(
+                dirty.set_weights(&SMatrix::repeat(f64::NAN), &SMatrix::identity()),
+                Err(SetError::NonFinite)
+            );
+            assert_eq!(
+                dirty.set_reference(99, &SVector::zeros()),
+                Err(SetError::StageOutOfRange)
+            );
+            assert_eq!(
+                dirty.set_bounds(
+                    &SVector::repeat(0.0),
+                    &SVector::repeat(-1.0),
+                    &SVector::repeat(0.0),
+                    &SVector::repeat(1.0)
+                ),
+                Err(SetError::CrossedBounds)
+            );
+        }
+        x = step(&mut clean, &x);
+        xd = step(&mut dirty, &xd);
+        assert_eq!(
+            x, xd,
+            "step {k}: the refused inputs changed the closed loop"
+        );
+    }
+}
+
+#[test]
+fn failing_qp_returns_the_previous_plan_shifted() {
+    let mut s = di();
+    let mut x = SVector::from([2.0, 0.0]);
+    for _ in 0..5 {
+        x = step(&mut s, &x);
+    }
+    s.prepare();
+    let (_, info) = s.feedback(&x);
+    assert_eq!(info.status, RtiStatus::Ok);
+    let plan: Vec<f64> = (0..15).map(|k| s.control(k).unwrap()[0]).collect();
+    // Now contradictory constraints: p + v >= 100 with |a| <= 1 from here.
+    s.set_constraint_bounds(
+        &SVector::from([100.0]),
+        &SVector::from([f64::INFINITY]),
+        &SVector::zeros(),
+        &SVector::zeros(),
+    )
+    .unwrap();
+    for (age, planned) in plan.iter().enumerate().take(4).skip(1) {
+        s.prepare();
+        let (u, info) = s.feedback(&x);
+        assert_eq!(info.status, RtiStatus::UsedPreviousPlan, "{info:?}");
+        assert_eq!(
+            info.qp.status,
+            mpc_runtime::QpStatus::Infeasible,
+            "{info:?}"
+        );
+        assert_eq!(u[0], *planned, "control {age} of the last good plan");
+    }
+}
+
+#[test]
+fn prepare_feedback_and_sqp_do_not_allocate() {
+    let mut s = di();
+    let x = SVector::from([2.0, 0.0]);
+    // Warm up once (nothing in the solver allocates, but the test harness might lazily).
+    s.prepare();
+    let _ = s.feedback(&x);
+    let (_, n) = count_allocations(|| {
+        for _ in 0..10 {
+            s.prepare();
+            let _ = s.feedback(&x);
+        }
+        s.solve_sqp(&x)
+    });
+    assert_eq!(n, 0, "allocations during prepare/feedback/solve_sqp");
+    // The counter works: a Vec allocates.
+    let (_, n) = count_allocations(|| vec![1u8; 16]);
+    assert_eq!(n, 1);
+    // And the f32 instantiation, on the quadrotor.
+    let mut q = Box::new(Rti::<
+        f32,
+        support::quadrotor::Quadrotor<f32>,
+        10,
+        4,
+        0,
+        14,
+        10,
+        0,
+        0,
+        10,
+    >::new(support::quadrotor::Quadrotor { dt: 0.04 }));
+    let x0 = SVector::<f32, 10>::from_fn(|i, _| support::quadrotor::X0[i] as f32);
+    let (_, n) = count_allocations(|| {
+        q.prepare();
+        q.feedback(&x0)
+    });
+    assert_eq!(n, 0);
+}
