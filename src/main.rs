@@ -1,8 +1,13 @@
 //! `mpcc`: the command-line front end of the mpcc NMPC compiler.
 
+use std::collections::HashMap;
+use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
+use mpc_dsl::lang::{ParseOptions, parse};
+use mpc_dsl::ocp::{Dynamics, Integrator, Ocp, ParamKind, Variable};
+use mpc_dsl::{Expr, ExprKind, Graph, Sparsity};
 
 /// A code-generating compiler for nonlinear model predictive control.
 #[derive(Parser)]
@@ -20,6 +25,15 @@ enum Command {
         #[arg(long, default_value = "flip")]
         mission: String,
     },
+    /// Parse and validate a `.mpc` file; print its dimensions, the size of the dynamics
+    /// before and after common-subexpression elimination, and the Jacobian sparsity.
+    Check {
+        /// The `.mpc` file.
+        file: PathBuf,
+        /// Apply the file's `variant NAME { ... }` block.
+        #[arg(long)]
+        variant: Option<String>,
+    },
 }
 
 fn main() -> ExitCode {
@@ -33,5 +47,206 @@ fn main() -> ExitCode {
             );
             ExitCode::FAILURE
         }
+        Command::Check { file, variant } => check(&file, variant),
     }
+}
+
+fn check(file: &std::path::Path, variant: Option<String>) -> ExitCode {
+    let shown = file.display().to_string();
+    let src = match std::fs::read_to_string(file) {
+        Ok(s) => s,
+        Err(e) => {
+            eprintln!("error: cannot read {shown}: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    let g = Graph::new();
+    let parsed = match parse(&g, &src, &ParseOptions { variant }) {
+        Ok(p) => p,
+        Err(diags) => {
+            eprint!("{}", diags.render(&shown, &src));
+            eprintln!("{shown}: {} error(s)", diags.errors().count());
+            return ExitCode::FAILURE;
+        }
+    };
+    for w in &parsed.warnings {
+        eprint!("{}", w.render(&shown, &src));
+    }
+    match report(&g, &parsed.ocp) {
+        Ok(text) => {
+            print!("{text}");
+            println!("{shown}: ok ({} warning(s))", parsed.warnings.len());
+            ExitCode::SUCCESS
+        }
+        Err(e) => {
+            eprintln!("error: {shown}: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn list(vars: &[Variable<'_>]) -> String {
+    vars.iter()
+        .map(|v| {
+            if v.scalar {
+                v.name.clone()
+            } else {
+                format!("{}[{}]", v.name, v.len())
+            }
+        })
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+/// Operations in the expression trees of `roots` if nothing were shared (f64: it can be
+/// astronomically large).
+fn tree_ops(roots: &[Expr<'_>]) -> f64 {
+    fn go(e: Expr<'_>, memo: &mut HashMap<usize, f64>) -> f64 {
+        if let Some(&v) = memo.get(&e.index()) {
+            return v;
+        }
+        let v = match e.kind() {
+            ExprKind::Constant(_) | ExprKind::Symbol(_) => 0.0,
+            ExprKind::Unary(_, a) | ExprKind::PowI(a, _) => 1.0 + go(a, memo),
+            ExprKind::Binary(_, a, b) => 1.0 + go(a, memo) + go(b, memo),
+        };
+        memo.insert(e.index(), v);
+        v
+    }
+    let mut memo = HashMap::new();
+    roots.iter().map(|&r| go(r, &mut memo)).sum()
+}
+
+fn pattern(s: &Sparsity, rows: &[String], cols: usize) -> String {
+    let width = rows.iter().map(String::len).max().unwrap_or(0);
+    let mut out = String::new();
+    for (i, name) in rows.iter().enumerate() {
+        let line: String = (0..cols)
+            .map(|j| if s.contains(i, j) { '*' } else { '.' })
+            .collect();
+        out.push_str(&format!("    {name:>width$}  {line}\n"));
+    }
+    out
+}
+
+fn report(g: &Graph, ocp: &Ocp<'_>) -> mpc_dsl::Result<String> {
+    use std::fmt::Write as _;
+    let mut o = String::new();
+    let (x, u, p) = (ocp.x(), ocp.u(), ocp.p());
+    let integ = match &ocp.dynamics {
+        Dynamics::Continuous {
+            integrator: Integrator::Rk4 { steps },
+            ..
+        } => format!("ode, rk4 with {steps} substep(s)"),
+        Dynamics::Continuous {
+            integrator: Integrator::Euler,
+            ..
+        } => "ode, explicit euler".into(),
+        Dynamics::Discrete { .. } => "discrete map".into(),
+    };
+    let params = ocp
+        .parameters
+        .iter()
+        .map(|q| {
+            let kind = match q.kind {
+                ParamKind::Stage => "stage",
+                ParamKind::Global => "global",
+            };
+            format!("{} ({kind})", list(std::slice::from_ref(&q.var)))
+        })
+        .collect::<Vec<_>>()
+        .join(" ");
+    let _ = writeln!(o, "model {}", ocp.name);
+    let _ = writeln!(
+        o,
+        "  states      nx = {:<3} {}",
+        ocp.nx(),
+        list(&ocp.states)
+    );
+    let _ = writeln!(
+        o,
+        "  controls    nu = {:<3} {}",
+        ocp.nu(),
+        list(&ocp.controls)
+    );
+    let _ = writeln!(o, "  parameters  np = {:<3} {params}", ocp.np());
+    let _ = writeln!(
+        o,
+        "  horizon     N = {}, dt = {} s ({integ})",
+        ocp.horizon.n, ocp.horizon.dt
+    );
+    let c = &ocp.cost;
+    let mut terms = Vec::new();
+    for (name, t) in [("Q", &c.state), ("R", &c.control), ("P", &c.terminal)] {
+        if let Some(t) = t {
+            terms.push(format!("{name} {}x{}", t.weight.nrows(), t.weight.ncols()));
+        }
+    }
+    for r in &c.residuals {
+        terms.push(format!("residual {} ({})", r.name, r.residual.len()));
+    }
+    if c.input_rate.is_some() {
+        terms.push("input rate".into());
+    }
+    let _ = writeln!(o, "  cost        {}", terms.join(", "));
+    let _ = writeln!(
+        o,
+        "  bounds      x: {} of {} entries, u: {} of {} entries",
+        ocp.state_bounds.active().len(),
+        ocp.nx(),
+        ocp.control_bounds.active().len(),
+        ocp.nu()
+    );
+    let soft = ocp.constraints.iter().filter(|k| k.soft.is_some()).count();
+    let rows: usize = ocp.constraints.iter().map(|k| k.expr.len()).sum();
+    let _ = writeln!(
+        o,
+        "  constraints {} general ({rows} rows, {soft} soft)",
+        ocp.constraints.len()
+    );
+    let mut inputs: Vec<Expr<'_>> = x.to_vec();
+    inputs.extend(u.iter().copied());
+    inputs.extend(p.iter().copied());
+    let f = ocp.dynamics_exprs();
+    let prog = g.compile(f, &inputs)?;
+    let _ = writeln!(
+        o,
+        "dynamics f(x,u,p): {} operations as trees, {} instructions after CSE",
+        tree_ops(f),
+        prog.instrs().len()
+    );
+    let fd = ocp.discrete_map()?;
+    let prog_d = g.compile(&fd, &inputs)?;
+    let _ = writeln!(
+        o,
+        "discrete map F(x,u,p) over dt: {:.3e} operations as trees, {} instructions after CSE",
+        tree_ops(&fd),
+        prog_d.instrs().len()
+    );
+    let mut wrt: Vec<Expr<'_>> = x.to_vec();
+    wrt.extend(u.iter().copied());
+    let jac = g.jacobian(f, &wrt)?;
+    let jac_d = g.jacobian(&fd, &wrt)?;
+    let prog_j = g.compile(jac_d.values(), &inputs)?;
+    let names: Vec<String> = x.iter().map(ToString::to_string).collect();
+    let cols: Vec<String> = wrt.iter().map(ToString::to_string).collect();
+    let _ = writeln!(
+        o,
+        "jacobian df/d(x,u): {}x{}, {} structural nonzeros",
+        jac.nrows(),
+        jac.ncols(),
+        jac.nnz()
+    );
+    let _ = writeln!(o, "    columns: {}", cols.join(" "));
+    o.push_str(&pattern(jac.sparsity(), &names, wrt.len()));
+    let _ = writeln!(
+        o,
+        "jacobian [A B] = dF/d(x,u): {}x{}, {} structural nonzeros, {} instructions after CSE",
+        jac_d.nrows(),
+        jac_d.ncols(),
+        jac_d.nnz(),
+        prog_j.instrs().len()
+    );
+    o.push_str(&pattern(jac_d.sparsity(), &names, wrt.len()));
+    Ok(o)
 }

@@ -21,6 +21,10 @@
 //! assert_eq!(values.len(), jac.nnz());
 //! ```
 //!
+//! On top of the core, [`ocp`] describes a whole optimal control problem ([`Ocp`], built with
+//! [`OcpBuilder`] and checked by [`Ocp::validate`]) and [`lang`] parses the same description
+//! from `.mpc` text, with line/column diagnostics (grammar: `docs/mpc-language.md`).
+//!
 //! Expressions borrow the [`Graph`] they live in; build one model in one graph. Node indices
 //! follow construction order and hashing never influences them, so the same model always
 //! lowers to the same program.
@@ -32,8 +36,10 @@ pub mod display;
 pub mod error;
 pub mod eval;
 pub mod graph;
+pub mod lang;
 pub mod linalg;
 pub mod models;
+pub mod ocp;
 pub mod ops;
 pub mod program;
 
@@ -41,5 +47,6 @@ pub use ad::{Jacobian, Sparsity};
 pub use error::{DslError, Result};
 pub use graph::{Expr, ExprKind, Graph, IntoExpr};
 pub use linalg::{Matrix, Vector};
+pub use ocp::{Ocp, OcpBuilder, OcpError, OcpWarning, ValidationErrors};
 pub use ops::{BinaryOp, UnaryOp};
 pub use program::{Instr, Operand, Program};

@@ -1,0 +1,416 @@
+//! The Rust front end: a builder that reads like the math.
+//!
+//! ```
+//! use mpc_dsl::{Graph, Matrix, Vector};
+//! use mpc_dsl::ocp::{Decl, Integrator, Ocp};
+//!
+//! let g = Graph::new();
+//! let mut b = Ocp::builder(&g, "double_integrator");
+//! let pos = b.state(Decl::scalar("pos").unit("m"));
+//! let vel = b.state(Decl::scalar("vel").unit("m/s"));
+//! let acc = b.control(Decl::scalar("acc"));
+//! let xref = b.stage_param(Decl::vector("xref", 2));
+//! b.ode(&[vel[0], acc[0]], Integrator::Rk4 { steps: 1 });
+//! b.horizon(20, 0.05);
+//! b.state_cost(Matrix::diag(&g, &Vector::constants(&g, &[10.0, 1.0])), &xref);
+//! b.control_cost(Matrix::identity(&g, 1), &Vector::zeros(&g, 1));
+//! b.bound(&acc, -5.0, 5.0);
+//! let ocp = b.build().unwrap();
+//! assert_eq!((ocp.nx(), ocp.nu(), ocp.np()), (2, 1, 2));
+//! ```
+
+use crate::graph::{Expr, Graph};
+use crate::linalg::{Matrix, Vector};
+
+use super::{
+    Bounds, Constraint, Cost, Dynamics, Horizon, InputRate, Integrator, Ocp, OcpError, ParamKind,
+    Parameter, Residual, Slack, Stage, Tracking, ValidationErrors, Variable,
+};
+
+/// A declaration of a state, control or parameter.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Decl {
+    name: String,
+    len: usize,
+    scalar: bool,
+    unit: Option<String>,
+    description: Option<String>,
+    start: Option<Vec<f64>>,
+}
+
+impl Decl {
+    /// A scalar, whose symbol is called `name`.
+    pub fn scalar(name: &str) -> Decl {
+        Decl {
+            name: name.to_owned(),
+            len: 1,
+            scalar: true,
+            unit: None,
+            description: None,
+            start: None,
+        }
+    }
+
+    /// A vector of `len` entries, whose symbols are called `name[0]`, ..., `name[len-1]`.
+    pub fn vector(name: &str, len: usize) -> Decl {
+        Decl {
+            len,
+            scalar: false,
+            ..Decl::scalar(name)
+        }
+    }
+
+    /// Sets the physical unit.
+    pub fn unit(mut self, unit: &str) -> Decl {
+        self.unit = Some(unit.to_owned());
+        self
+    }
+
+    /// Sets the description.
+    pub fn describe(mut self, text: &str) -> Decl {
+        self.description = Some(text.to_owned());
+        self
+    }
+
+    /// Sets the initial guess (states, controls) or default value (parameters). One value is
+    /// broadcast to every entry.
+    pub fn start(mut self, values: &[f64]) -> Decl {
+        self.start = Some(if values.len() == 1 {
+            vec![values[0]; self.len]
+        } else {
+            values.to_vec()
+        });
+        self
+    }
+
+    fn into_variable<'g>(self, g: &'g Graph) -> Variable<'g> {
+        let symbols = if self.scalar {
+            Vector::new(vec![g.symbol(&self.name)])
+        } else {
+            g.symbols(&self.name, self.len)
+        };
+        Variable {
+            name: self.name,
+            symbols,
+            scalar: self.scalar,
+            unit: self.unit,
+            description: self.description,
+            start: self.start,
+        }
+    }
+}
+
+/// Builds an [`Ocp`]. Methods record what they are given; [`build`](Self::build) validates
+/// everything at once and reports every error.
+#[derive(Debug)]
+pub struct OcpBuilder<'g> {
+    graph: &'g Graph,
+    ocp: Ocp<'g>,
+    has_dynamics: bool,
+    has_horizon: bool,
+    bound_requests: Vec<(Vec<Expr<'g>>, Vec<f64>, Vec<f64>)>,
+    errors: Vec<OcpError>,
+}
+
+impl<'g> OcpBuilder<'g> {
+    /// An empty problem called `name` in `graph`.
+    pub fn new(graph: &'g Graph, name: &str) -> OcpBuilder<'g> {
+        OcpBuilder {
+            graph,
+            ocp: Ocp {
+                name: name.to_owned(),
+                states: Vec::new(),
+                controls: Vec::new(),
+                parameters: Vec::new(),
+                dynamics: Dynamics::Discrete {
+                    x_next: Vector::default(),
+                },
+                horizon: Horizon { n: 0, dt: 0.0 },
+                cost: Cost::default(),
+                state_bounds: Bounds::unbounded(0),
+                control_bounds: Bounds::unbounded(0),
+                constraints: Vec::new(),
+            },
+            has_dynamics: false,
+            has_horizon: false,
+            bound_requests: Vec::new(),
+            errors: Vec::new(),
+        }
+    }
+
+    /// The graph the problem is built in.
+    pub fn graph(&self) -> &'g Graph {
+        self.graph
+    }
+
+    /// Declares a state; returns its symbols.
+    pub fn state(&mut self, decl: Decl) -> Vector<'g> {
+        let v = decl.into_variable(self.graph);
+        let s = v.symbols.clone();
+        self.ocp.states.push(v);
+        s
+    }
+
+    /// Declares a control; returns its symbols.
+    pub fn control(&mut self, decl: Decl) -> Vector<'g> {
+        let v = decl.into_variable(self.graph);
+        let s = v.symbols.clone();
+        self.ocp.controls.push(v);
+        s
+    }
+
+    /// Declares a runtime parameter; returns its symbols.
+    pub fn param(&mut self, decl: Decl, kind: ParamKind) -> Vector<'g> {
+        let var = decl.into_variable(self.graph);
+        let s = var.symbols.clone();
+        self.ocp.parameters.push(Parameter { var, kind });
+        s
+    }
+
+    /// Declares a parameter with one value per stage (a reference).
+    pub fn stage_param(&mut self, decl: Decl) -> Vector<'g> {
+        self.param(decl, ParamKind::Stage)
+    }
+
+    /// Declares a parameter with one value for the whole horizon.
+    pub fn global_param(&mut self, decl: Decl) -> Vector<'g> {
+        self.param(decl, ParamKind::Global)
+    }
+
+    /// Continuous dynamics `xdot = f(x, u, p)`, one expression per state entry.
+    pub fn ode(&mut self, xdot: &[Expr<'g>], integrator: Integrator) -> &mut Self {
+        self.set_dynamics(Dynamics::Continuous {
+            xdot: xdot.iter().copied().collect(),
+            integrator,
+        })
+    }
+
+    /// Discrete dynamics `x_{k+1} = F(x_k, u_k, p)`.
+    pub fn discrete(&mut self, x_next: &[Expr<'g>]) -> &mut Self {
+        self.set_dynamics(Dynamics::Discrete {
+            x_next: x_next.iter().copied().collect(),
+        })
+    }
+
+    fn set_dynamics(&mut self, d: Dynamics<'g>) -> &mut Self {
+        if self.has_dynamics {
+            self.errors.push(OcpError::Duplicate {
+                what: "dynamics".into(),
+            });
+        }
+        self.has_dynamics = true;
+        self.ocp.dynamics = d;
+        self
+    }
+
+    /// Horizon `N` intervals of `dt` seconds.
+    pub fn horizon(&mut self, n: usize, dt: f64) -> &mut Self {
+        self.has_horizon = true;
+        self.ocp.horizon = Horizon { n, dt };
+        self
+    }
+
+    /// State tracking `1/2 |x_k - xref_k|^2_Q` on `k < N`.
+    pub fn state_cost(&mut self, q: Matrix<'g>, xref: &[Expr<'g>]) -> &mut Self {
+        self.ocp.cost.state = Some(tracking(q, xref));
+        self
+    }
+
+    /// Control tracking `1/2 |u_k - uref_k|^2_R` on `k < N`.
+    pub fn control_cost(&mut self, r: Matrix<'g>, uref: &[Expr<'g>]) -> &mut Self {
+        self.ocp.cost.control = Some(tracking(r, uref));
+        self
+    }
+
+    /// Terminal tracking `1/2 |x_N - xref_N|^2_P`.
+    pub fn terminal_cost(&mut self, p: Matrix<'g>, xref: &[Expr<'g>]) -> &mut Self {
+        self.ocp.cost.terminal = Some(tracking(p, xref));
+        self
+    }
+
+    /// Nonlinear least squares `1/2 |r(x, u, p)|^2_W` on `k < N` (path) or at `N`.
+    pub fn residual(
+        &mut self,
+        name: &str,
+        stage: Stage,
+        r: &[Expr<'g>],
+        w: Matrix<'g>,
+    ) -> &mut Self {
+        self.ocp.cost.residuals.push(Residual {
+            name: name.to_owned(),
+            stage,
+            residual: r.iter().copied().collect(),
+            weight: w,
+        });
+        self
+    }
+
+    /// Input-rate cost `1/2 |u_k - u_{k-1}|^2_W`, with `u_{-1} = prev` (parameter symbols).
+    pub fn input_rate(&mut self, w: Matrix<'g>, prev: &[Expr<'g>]) -> &mut Self {
+        self.ocp.cost.input_rate = Some(InputRate {
+            weight: w,
+            prev: prev.iter().copied().collect(),
+        });
+        self
+    }
+
+    /// Box bound `lower <= s <= upper` on every state or control symbol in `symbols`
+    /// (infinite values allowed).
+    pub fn bound(&mut self, symbols: &[Expr<'g>], lower: f64, upper: f64) -> &mut Self {
+        let n = symbols.len();
+        self.bound_each(symbols, &vec![lower; n], &vec![upper; n])
+    }
+
+    /// Box bounds with one lower and one upper value per symbol.
+    pub fn bound_each(&mut self, symbols: &[Expr<'g>], lower: &[f64], upper: &[f64]) -> &mut Self {
+        self.bound_requests
+            .push((symbols.to_vec(), lower.to_vec(), upper.to_vec()));
+        self
+    }
+
+    /// General constraint `lower <= h <= upper` (hard; see [`soft_constraint`]).
+    ///
+    /// [`soft_constraint`]: Self::soft_constraint
+    pub fn constraint(
+        &mut self,
+        name: &str,
+        stage: Stage,
+        h: &[Expr<'g>],
+        lower: &[f64],
+        upper: &[f64],
+    ) -> &mut Self {
+        self.push_constraint(name, stage, h, lower, upper, None)
+    }
+
+    /// Soft general constraint with slack penalties.
+    pub fn soft_constraint(
+        &mut self,
+        name: &str,
+        stage: Stage,
+        h: &[Expr<'g>],
+        lower: &[f64],
+        upper: &[f64],
+        slack: Slack,
+    ) -> &mut Self {
+        self.push_constraint(name, stage, h, lower, upper, Some(slack))
+    }
+
+    fn push_constraint(
+        &mut self,
+        name: &str,
+        stage: Stage,
+        h: &[Expr<'g>],
+        lower: &[f64],
+        upper: &[f64],
+        soft: Option<Slack>,
+    ) -> &mut Self {
+        let bcast = |v: &[f64]| {
+            if v.len() == 1 {
+                vec![v[0]; h.len()]
+            } else {
+                v.to_vec()
+            }
+        };
+        self.ocp.constraints.push(Constraint {
+            name: name.to_owned(),
+            stage,
+            expr: h.iter().copied().collect(),
+            lower: bcast(lower),
+            upper: bcast(upper),
+            soft,
+        });
+        self
+    }
+
+    /// Finishes and validates. Returns the problem and the warnings.
+    ///
+    /// # Errors
+    /// Every problem found, as [`ValidationErrors`].
+    pub fn build_with_warnings(mut self) -> Result<(Ocp<'g>, Vec<OcpWarning>), ValidationErrors> {
+        if !self.has_dynamics {
+            self.errors.push(OcpError::Missing {
+                what: "dynamics".into(),
+            });
+        }
+        if !self.has_horizon {
+            self.errors.push(OcpError::Missing {
+                what: "horizon".into(),
+            });
+        }
+        let (nx, nu) = (self.ocp.nx(), self.ocp.nu());
+        self.ocp.state_bounds = Bounds::unbounded(nx);
+        self.ocp.control_bounds = Bounds::unbounded(nu);
+        let x = self.ocp.x();
+        let u = self.ocp.u();
+        for (syms, lo, hi) in std::mem::take(&mut self.bound_requests) {
+            if lo.len() != syms.len() || hi.len() != syms.len() {
+                self.errors.push(OcpError::DimensionMismatch {
+                    item: "box bound".into(),
+                    found: format!("{} lower and {} upper values", lo.len(), hi.len()),
+                    expected: format!("{} (one per bounded entry)", syms.len()),
+                });
+                continue;
+            }
+            for ((s, l), h) in syms.iter().zip(lo).zip(hi) {
+                let (bounds, idx) = if let Some(i) = x.iter().position(|e| e == s) {
+                    (&mut self.ocp.state_bounds, i)
+                } else if let Some(i) = u.iter().position(|e| e == s) {
+                    (&mut self.ocp.control_bounds, i)
+                } else {
+                    self.errors.push(OcpError::NotAVariable {
+                        item: "box bound".into(),
+                        name: s.to_string(),
+                    });
+                    continue;
+                };
+                bounds.lower[idx] = l;
+                bounds.upper[idx] = h;
+            }
+        }
+        let result = self.ocp.validate();
+        match result {
+            Ok(w) if self.errors.is_empty() => Ok((self.ocp, w)),
+            Err(e)
+                if e.errors
+                    .iter()
+                    .all(|err| err.culprit() == Some("the dynamics"))
+                    && !self.has_dynamics =>
+            {
+                Err(ValidationErrors {
+                    errors: self.errors,
+                    warnings: e.warnings,
+                })
+            }
+            Ok(w) => Err(ValidationErrors {
+                errors: self.errors,
+                warnings: w,
+            }),
+            Err(mut e) => {
+                if !self.has_dynamics {
+                    // Already reported as missing; its empty placeholder has no length.
+                    e.errors.retain(|err| err.culprit() != Some("the dynamics"));
+                }
+                self.errors.append(&mut e.errors);
+                e.errors = self.errors;
+                Err(e)
+            }
+        }
+    }
+
+    /// Finishes and validates, dropping the warnings.
+    ///
+    /// # Errors
+    /// Every problem found, as [`ValidationErrors`].
+    pub fn build(self) -> Result<Ocp<'g>, ValidationErrors> {
+        self.build_with_warnings().map(|(o, _)| o)
+    }
+}
+
+use super::OcpWarning;
+
+fn tracking<'g>(w: Matrix<'g>, reference: &[Expr<'g>]) -> Tracking<'g> {
+    Tracking {
+        weight: w,
+        reference: reference.iter().copied().collect(),
+    }
+}

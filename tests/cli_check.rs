@@ -1,0 +1,61 @@
+//! `mpcc check` on good and bad `.mpc` files: output, exit status and caret diagnostics.
+
+use std::process::Command;
+
+fn mpcc(args: &[&str]) -> (bool, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_mpcc"))
+        .args(args)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .expect("the mpcc binary runs");
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn check_accepts_the_models() {
+    let (ok, out, err) = mpcc(&["check", "models/quadrotor_rates.mpc"]);
+    assert!(ok, "{err}");
+    assert!(out.contains("nx = 10"), "{out}");
+    assert!(out.contains("nu = 4"), "{out}");
+    assert!(out.contains("N = 20, dt = 0.05"), "{out}");
+    assert!(out.contains("instructions after CSE"), "{out}");
+    assert!(out.contains("jacobian df/d(x,u): 10x14"), "{out}");
+    // pdot = v: the first row of the Jacobian has exactly one entry, at v[0] (column 7).
+    assert!(out.contains("p[0]  .......*......"), "{out}");
+    let (ok, out, _) = mpcc(&["check", "models/quadrotor_rates.mpc", "--variant", "A"]);
+    assert!(ok);
+    assert!(out.contains("N = 10, dt = 0.04"), "{out}");
+    let (ok, out, err) = mpcc(&["check", "models/paper_pointmass.mpc"]);
+    assert!(ok, "{err}");
+    assert!(
+        out.contains("nx = 9") && out.contains("input rate"),
+        "{out}"
+    );
+}
+
+#[test]
+fn check_rejects_a_bad_file_with_a_caret() {
+    let dir = env!("CARGO_TARGET_TMPDIR");
+    let path = format!("{dir}/bad_check.mpc");
+    std::fs::write(
+        &path,
+        "model bad;\nstate x;\ncontrol u;\ndynamics ode euler { der(x) = u * speed; }\nhorizon N = 5, dt = 0.1;\n",
+    )
+    .unwrap();
+    let (ok, out, err) = mpcc(&["check", &path]);
+    assert!(!ok, "{out}");
+    assert!(err.contains("unknown name `speed`"), "{err}");
+    assert!(err.contains("bad_check.mpc:4:35"), "{err}");
+    assert!(
+        err.contains("dynamics ode euler { der(x) = u * speed; }"),
+        "{err}"
+    );
+    assert!(err.contains('^'), "{err}");
+    let (ok, _, err) = mpcc(&["check", "no/such/file.mpc"]);
+    assert!(!ok);
+    assert!(err.contains("cannot read"), "{err}");
+}
