@@ -320,6 +320,11 @@ impl<
         Ok(())
     }
 
+    /// The QP of the last preparation (for inspection, export and benchmarks).
+    pub fn qp(&self) -> &OcpQp<T, NX, NU, NG, NGN, N> {
+        &self.qp
+    }
+
     /// State `k <= N` of the current trajectory.
     pub fn state(&self, k: usize) -> Option<&SVector<T, NX>> {
         if k == N {

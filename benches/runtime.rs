@@ -1,0 +1,153 @@
+//! Criterion benchmarks of the runtime solver on QR-bench (`shared/anchors/README.md`).
+//!
+//! - `qp/{mpcc,clarabel}/N{10,20}`: one QP of the QR-bench closed loop (the one prepared at
+//!   step 10, where thrust and rate bounds are active), solved by our Riccati interior-point
+//!   method and by clarabel on the identical QP written out in sparse form. Both to their
+//!   default tolerances; clarabel's setup (KKT assembly and symbolic factorization) is outside
+//!   the timed region, so the comparison is solve against solve.
+//! - `rti/{A,B}/{prepare,feedback,step}`: the closed loop of configs A (N = 10, dt = 0.04) and
+//!   B (N = 20, dt = 0.05); each timed iteration is one control step of the loop, which restarts
+//!   after 4 s.
+//!
+//! Run with `cargo bench --bench runtime`.
+
+use std::hint::black_box;
+use std::time::{Duration, Instant};
+
+use clarabel::algebra::CscMatrix;
+use clarabel::solver::{DefaultSettingsBuilder, DefaultSolver, IPSolver, SupportedConeT};
+use criterion::{Criterion, criterion_group, criterion_main};
+use mpc_runtime::{OcpQp, QpSolver, Rti, RtiStatus};
+use nalgebra::{SMatrix, SVector};
+
+#[allow(unused_imports)]
+#[path = "../runtime/tests/support/mod.rs"]
+mod support;
+
+use support::quadrotor::{
+    NU, NX, NY, Quadrotor, R_DIAG, U_HI, U_LO, U_REF, X_REF, X0, plant, q_diag,
+};
+
+type Solver<const N: usize> = Rti<f64, Quadrotor<f64>, NX, NU, 0, NY, NX, 0, 0, N>;
+
+fn setup<const N: usize>(dt: f64) -> Box<Solver<N>> {
+    let mut s = Box::new(Solver::<N>::new(Quadrotor { dt }));
+    let mut w = SMatrix::<f64, NY, NY>::zeros();
+    let mut wn = SMatrix::<f64, NX, NX>::zeros();
+    for (i, q) in q_diag().iter().enumerate() {
+        w[(i, i)] = *q;
+        wn[(i, i)] = 5.0 * q;
+    }
+    for (i, r) in R_DIAG.iter().enumerate() {
+        w[(NX + i, NX + i)] = *r;
+    }
+    s.set_weights(&w, &wn).expect("finite weights");
+    let yref = SVector::<f64, NY>::from_fn(|i, _| if i < NX { X_REF[i] } else { U_REF[i - NX] });
+    for k in 0..N {
+        s.set_reference(k, &yref).expect("finite reference");
+    }
+    s.set_terminal_reference(&SVector::from(X_REF))
+        .expect("finite reference");
+    let inf = SVector::<f64, NX>::repeat(f64::INFINITY);
+    s.set_bounds(&-inf, &inf, &SVector::from(U_LO), &SVector::from(U_HI))
+        .expect("bounds");
+    s.set_guess(&SVector::from(X0), &SVector::zeros())
+        .expect("guess");
+    s
+}
+
+/// The QP prepared at step `k` of the closed loop.
+fn qp_at<const N: usize>(dt: f64, k: usize) -> OcpQp<f64, NX, NU, 0, 0, N> {
+    let mut s = setup::<N>(dt);
+    let mut x = SVector::from(X0);
+    for _ in 0..k {
+        s.prepare();
+        let (u, _) = s.feedback(&x);
+        x = plant(&x, &u, dt, 10);
+    }
+    s.prepare();
+    let mut qp = *s.qp();
+    qp.x0 = x - s.state(0).copied().unwrap_or(x);
+    qp
+}
+
+fn bench_qp<const N: usize>(c: &mut Criterion, dt: f64) {
+    let qp = qp_at::<N>(dt, 10);
+    let mut group = c.benchmark_group("qp");
+    let mut ours = Box::new(QpSolver::<f64, NX, NU, 0, 0, N>::NEW);
+    group.bench_function(format!("mpcc/N{N}"), |b| {
+        b.iter(|| black_box(ours.solve(black_box(&qp))))
+    });
+    let d = support::dense(&qp);
+    let p = CscMatrix::from(&d.p).to_triu();
+    let a = CscMatrix::from(&d.a);
+    let cones = [
+        SupportedConeT::ZeroConeT(d.n_eq),
+        SupportedConeT::NonnegativeConeT(d.n_ineq),
+    ];
+    let settings = DefaultSettingsBuilder::default()
+        .verbose(false)
+        .build()
+        .expect("settings");
+    group.bench_function(format!("clarabel/N{N}"), |b| {
+        b.iter_custom(|iters| {
+            let mut total = Duration::ZERO;
+            for _ in 0..iters {
+                let mut solver = DefaultSolver::new(&p, &d.q, &a, &d.b, &cones, settings.clone())
+                    .expect("clarabel setup");
+                let start = Instant::now();
+                solver.solve();
+                total += start.elapsed();
+                black_box(&solver.solution.x);
+            }
+            total
+        })
+    });
+    group.finish();
+}
+
+fn bench_rti<const N: usize>(c: &mut Criterion, name: &str, dt: f64, steps: usize) {
+    let mut group = c.benchmark_group(format!("rti/{name}"));
+    for phase in ["prepare", "feedback", "step"] {
+        let mut s = setup::<N>(dt);
+        let mut x = SVector::from(X0);
+        let mut k = 0;
+        group.bench_function(phase, |b| {
+            b.iter_custom(|iters| {
+                let mut total = Duration::ZERO;
+                for _ in 0..iters {
+                    if k == steps {
+                        s = setup::<N>(dt);
+                        x = SVector::from(X0);
+                        k = 0;
+                    }
+                    let t0 = Instant::now();
+                    s.prepare();
+                    let t1 = Instant::now();
+                    let (u, info) = s.feedback(&x);
+                    let t2 = Instant::now();
+                    debug_assert_eq!(info.status, RtiStatus::Ok);
+                    total += match phase {
+                        "prepare" => t1 - t0,
+                        "feedback" => t2 - t1,
+                        _ => t2 - t0,
+                    };
+                    x = plant(&x, &black_box(u), dt, 10);
+                    k += 1;
+                }
+                total
+            })
+        });
+    }
+    group.finish();
+}
+
+fn benches(c: &mut Criterion) {
+    bench_qp::<10>(c, 0.04);
+    bench_qp::<20>(c, 0.05);
+    bench_rti::<10>(c, "A", 0.04, 100);
+    bench_rti::<20>(c, "B", 0.05, 80);
+}
+
+criterion_group!(runtime, benches);
+criterion_main!(runtime);
