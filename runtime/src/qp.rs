@@ -190,7 +190,7 @@ impl<T: Real> QpSettings<T> {
         reg: T::DEFAULT_REG,
         warm_start: false,
         mu0: T::DEFAULT_MU0,
-        refine: 1,
+        refine: T::DEFAULT_REFINE,
     };
 }
 
@@ -587,7 +587,7 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
             };
             self.rb[k] = s.a * x + s.b * u + s.f - xnext;
             re = re.max(max_abs(self.rb[k].as_slice()));
-            self.hx[k] = s.q * x + s.s.transpose() * u + s.gx;
+            self.hx[k] = s.q * x + s.s.tr_mul(&u) + s.gx;
             self.hu[k] = s.r * u + s.s * x + s.gu;
             gscale = gscale.max(self.hu[k].amax());
             if k > 0 {
@@ -602,16 +602,16 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
                 + self.rg[k].complementarity();
             // Stationarity with the current multipliers, and the size of its terms.
             let gd = self.rg[k].dual();
-            let bpi = s.b.transpose() * self.sol.pi[k];
+            let bpi = s.b.tr_mul(&self.sol.pi[k]);
             let ud = self.ru[k].dual();
-            let dgd = s.d.transpose() * gd;
+            let dgd = s.d.tr_mul(&gd);
             let su = self.hu[k] + bpi - ud - dgd;
             rs = rs.max(max_abs(su.as_slice()));
             gscale = gscale.max(bpi.amax()).max(ud.amax()).max(dgd.amax());
             if k > 0 {
-                let api = s.a.transpose() * self.sol.pi[k];
+                let api = s.a.tr_mul(&self.sol.pi[k]);
                 let xd = self.rx[k].dual();
-                let cgd = s.c.transpose() * gd;
+                let cgd = s.c.tr_mul(&gd);
                 let sx = self.hx[k] + api - self.sol.pi[k - 1] - xd - cgd;
                 rs = rs.max(max_abs(sx.as_slice()));
                 gscale = gscale
@@ -630,7 +630,7 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
             .max(self.rgn.residuals(&(t.c * xn)));
         comp += self.rxn.complementarity() + self.rgn.complementarity();
         if N > 0 {
-            let (xd, cgd) = (self.rxn.dual(), t.c.transpose() * self.rgn.dual());
+            let (xd, cgd) = (self.rxn.dual(), t.c.tr_mul(&self.rgn.dual()));
             let sx = self.hxn - self.sol.pi[N - 1] - xd - cgd;
             rs = rs.max(max_abs(sx.as_slice()));
             gscale = gscale
@@ -661,8 +661,8 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
             let mut rbar = s.r
                 + Mat::<T, NU, NU>::from_diagonal(&self.ru[k].sigma())
                 + dts * s.d
-                + s.b.transpose() * pb;
-            let sbar = s.s + dts * s.c + s.b.transpose() * pa;
+                + s.b.tr_mul(&pb);
+            let sbar = s.s + dts * s.c + s.b.tr_mul(&pa);
             // Symmetrize, regularize, factorize; more regularization if it fails.
             rbar = (rbar + rbar.transpose()) * T::lit(0.5);
             let mut reg = self.settings.reg;
@@ -697,7 +697,7 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
                 let qt = s.q
                     + Mat::<T, NX, NX>::from_diagonal(&self.rx[k].sigma())
                     + s.c.transpose() * sig_g * s.c;
-                let pk = qt + s.a.transpose() * pa + sbar.transpose() * kmat;
+                let pk = qt + s.a.tr_mul(&pa) + sbar.tr_mul(&kmat);
                 p = (pk + pk.transpose()) * T::lit(0.5);
             }
             if !finite_mat(&self.kmat[k]) {
@@ -724,12 +724,12 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
             return;
         }
         let t = &qp.terminal;
-        self.gnt = self.hxn + self.rxn.gradient(rhs) + t.c.transpose() * self.rgn.gradient(rhs);
+        self.gnt = self.hxn + self.rxn.gradient(rhs) + t.c.tr_mul(&self.rgn.gradient(rhs));
         for k in 0..N {
             let s = &qp.stages[k];
             let wg = self.rg[k].gradient(rhs);
-            self.gut[k] = self.hu[k] + self.ru[k].gradient(rhs) + s.d.transpose() * wg;
-            self.gxt[k] = self.hx[k] + self.rx[k].gradient(rhs) + s.c.transpose() * wg;
+            self.gut[k] = self.hu[k] + self.ru[k].gradient(rhs) + s.d.tr_mul(&wg);
+            self.gxt[k] = self.hx[k] + self.rx[k].gradient(rhs) + s.c.tr_mul(&wg);
             self.rbt[k] = self.rb[k];
         }
         self.gx0 = self.gxt;
@@ -760,11 +760,11 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
             let s = &qp.stages[k];
             self.pvn[k] = pv;
             let pb = self.pn[k] * self.rbt[k] + pv;
-            let rbar = self.gut[k] + s.b.transpose() * pb;
+            let rbar = self.gut[k] + s.b.tr_mul(&pb);
             let kv = -self.chol_solve(k, &rbar);
             self.kv[k] = kv;
             if k > 0 {
-                pv = self.gxt[k] + s.a.transpose() * pb + self.sbar[k].transpose() * kv;
+                pv = self.gxt[k] + s.a.tr_mul(&pb) + self.sbar[k].tr_mul(&kv);
             }
         }
         let mut dx = Vect::<T, NX>::zeros();
@@ -796,24 +796,23 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
             self.gut[k] = s.r * du
                 + s.s * dx
                 + self.ru[k].sigma().component_mul(&du)
-                + s.d.transpose() * wg
+                + s.d.tr_mul(&wg)
                 + self.gu0[k]
-                + s.b.transpose() * pi0[k];
+                + s.b.tr_mul(&pi0[k]);
             if k > 0 {
                 self.gxt[k] = s.q * dx
-                    + s.s.transpose() * du
+                    + s.s.tr_mul(&du)
                     + self.rx[k].sigma().component_mul(&dx)
-                    + s.c.transpose() * wg
+                    + s.c.tr_mul(&wg)
                     + self.gx0[k]
-                    + s.a.transpose() * pi0[k]
+                    + s.a.tr_mul(&pi0[k])
                     - pi0[k - 1];
             }
             self.rbt[k] = s.a * dx + s.b * du + self.rb[k] - next;
         }
         let wgn = self.rgn.sigma().component_mul(&(t.c * dxn0));
-        self.gnt =
-            t.q * dxn0 + self.rxn.sigma().component_mul(&dxn0) + t.c.transpose() * wgn + self.gn0
-                - pi0[N - 1];
+        self.gnt = t.q * dxn0 + self.rxn.sigma().component_mul(&dxn0) + t.c.tr_mul(&wgn) + self.gn0
+            - pi0[N - 1];
         self.lq_solve(qp);
         for k in 0..N {
             self.dx[k] += dx0[k];

@@ -28,6 +28,9 @@ pub trait Real: RealField + Copy + Default + PartialOrd {
     const SQP_TOL: Self;
     /// Default initial complementarity of the QP solver.
     const DEFAULT_MU0: Self;
+    /// Default iterative-refinement steps per Newton solve: none in f64, one in f32, where the
+    /// Riccati matrices lose the accuracy it recovers.
+    const DEFAULT_REFINE: u32;
 
     /// Conversion from an `f64` literal (rounding for `f32`).
     fn lit(v: f64) -> Self;
@@ -51,6 +54,7 @@ impl Real for f64 {
     const SIGMA_MAX: Self = 3e23;
     const SQP_TOL: Self = 1e-6;
     const DEFAULT_MU0: Self = 100.0;
+    const DEFAULT_REFINE: u32 = 0;
 
     #[inline]
     fn lit(v: f64) -> Self {
@@ -82,6 +86,7 @@ impl Real for f32 {
     const SIGMA_MAX: Self = 1e8;
     const SQP_TOL: Self = 1e-4;
     const DEFAULT_MU0: Self = 100.0;
+    const DEFAULT_REFINE: u32 = 1;
 
     #[inline]
     fn lit(v: f64) -> Self {

@@ -377,12 +377,12 @@ impl<
             let r = self.model.residual(&x, &u, &p, &mut jx, &mut ju) - self.yref[k];
             let wjx = w * jx;
             let wju = w * ju;
-            s.q = jx.transpose() * wjx;
-            s.s = ju.transpose() * wjx;
-            s.r = ju.transpose() * wju;
+            s.q = jx.tr_mul(&wjx);
+            s.s = ju.tr_mul(&wjx);
+            s.r = ju.tr_mul(&wju);
             let wr = w * r;
-            s.gx = jx.transpose() * wr;
-            s.gu = ju.transpose() * wr;
+            s.gx = jx.tr_mul(&wr);
+            s.gu = ju.tr_mul(&wr);
             s.lbx = self.lbx - x;
             s.ubx = self.ubx - x;
             s.lbu = self.lbu - u;
@@ -396,8 +396,8 @@ impl<
         let mut jx = SMatrix::<T, NYN, NX>::zeros();
         let r = self.model.terminal_residual(&xn, &pn, &mut jx) - self.yref_n;
         let wjx = wn * jx;
-        t.q = jx.transpose() * wjx;
-        t.gx = jx.transpose() * (wn * r);
+        t.q = jx.tr_mul(&wjx);
+        t.gx = jx.tr_mul(&(wn * r));
         t.lbx = self.lbx - xn;
         t.ubx = self.ubx - xn;
         let h = self.model.terminal_constraints(&xn, &pn, &mut t.c);
@@ -502,13 +502,13 @@ impl<
             let (x, u, p) = (&self.x[k], &self.u[k], &self.p[k]);
             let next = if k + 1 < N { &self.x[k + 1] } else { &self.xn };
             let r = self.model.residual(x, u, p, &mut jx, &mut ju) - self.yref[k];
-            cost += (r.transpose() * self.w * r)[(0, 0)] * T::lit(0.5);
+            cost += r.dot(&(self.w * r)) * T::lit(0.5);
             let d = self.model.dynamics(x, u, p, &mut a, &mut b) - next;
             defect += d.abs().sum();
         }
         let mut jn = SMatrix::<T, NYN, NX>::zeros();
         let r = self.model.terminal_residual(&self.xn, &self.pn, &mut jn) - self.yref_n;
-        cost += (r.transpose() * self.wn * r)[(0, 0)] * T::lit(0.5);
+        cost += r.dot(&(self.wn * r)) * T::lit(0.5);
         cost + nu * defect
     }
 
