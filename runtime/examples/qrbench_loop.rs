@@ -1,0 +1,56 @@
+//! Runs the QR-bench closed loop (config A: N = 10, dt = 0.04, 100 steps) with the hand-written
+//! quadrotor model, for instruction counts per RTI step:
+//!
+//! `valgrind --tool=callgrind target/release/examples/qrbench_loop`
+//!
+//! It prints the number of steps, the mean QP iterations and the final position error.
+
+#[allow(dead_code)]
+#[path = "../tests/support/quadrotor.rs"]
+mod quadrotor;
+
+use mpc_runtime::{Rti, RtiStatus};
+use nalgebra::{SMatrix, SVector};
+use quadrotor::{NU, NX, NY, Quadrotor, R_DIAG, U_HI, U_LO, U_REF, X_REF, X0, plant, q_diag};
+
+fn main() {
+    let dt = 0.04;
+    let mut s =
+        Box::new(Rti::<f64, Quadrotor<f64>, NX, NU, 0, NY, NX, 0, 0, 10>::new(Quadrotor { dt }));
+    let mut w = SMatrix::<f64, NY, NY>::zeros();
+    let mut wn = SMatrix::<f64, NX, NX>::zeros();
+    for (i, q) in q_diag().iter().enumerate() {
+        w[(i, i)] = *q;
+        wn[(i, i)] = 5.0 * q;
+    }
+    for (i, r) in R_DIAG.iter().enumerate() {
+        w[(NX + i, NX + i)] = *r;
+    }
+    s.set_weights(&w, &wn).expect("finite weights");
+    let yref = SVector::<f64, NY>::from_fn(|i, _| if i < NX { X_REF[i] } else { U_REF[i - NX] });
+    for k in 0..10 {
+        s.set_reference(k, &yref).expect("finite reference");
+    }
+    s.set_terminal_reference(&SVector::from(X_REF))
+        .expect("finite reference");
+    let inf = SVector::<f64, NX>::repeat(f64::INFINITY);
+    s.set_bounds(&-inf, &inf, &SVector::from(U_LO), &SVector::from(U_HI))
+        .expect("bounds");
+    s.set_guess(&SVector::from(X0), &SVector::zeros())
+        .expect("guess");
+    let mut x = SVector::from(X0);
+    let mut iterations = 0u32;
+    let steps = 100;
+    for _ in 0..steps {
+        s.prepare();
+        let (u, info) = s.feedback(&x);
+        assert_eq!(info.status, RtiStatus::Ok);
+        iterations += info.qp.iterations;
+        x = plant(&x, &u, dt, 10);
+    }
+    let err = ((x[0] - 4.0).powi(2) + x[1].powi(2) + (x[2] - 2.0).powi(2)).sqrt();
+    println!(
+        "steps {steps}, mean QP iterations {:.2}, final position error {err:.3e} m",
+        f64::from(iterations) / steps as f64
+    );
+}
