@@ -4,6 +4,7 @@
 //! `valgrind --tool=callgrind target/release/examples/qrbench_loop`
 //!
 //! It prints the number of steps, the mean QP iterations and the final position error.
+//! Environment: `COLD=1` starts every QP cold, `TOL=1e-6` loosens the QP tolerances.
 
 #[allow(dead_code)]
 #[path = "../tests/support/quadrotor.rs"]
@@ -38,6 +39,18 @@ fn main() {
         .expect("bounds");
     s.set_guess(&SVector::from(X0), &SVector::zeros())
         .expect("guess");
+    // Multipliers of the previous control step's QP as the start of the next (the default;
+    // COLD=1 turns it off). TOL=1e-6 sets the QP tolerances (complementarity 100x tighter).
+    s.settings.qp.warm_start_dual = std::env::var_os("COLD").is_none();
+    if let Some(t) = std::env::var("TOL")
+        .ok()
+        .and_then(|v| v.parse::<f64>().ok())
+    {
+        s.settings.qp.tol_stat = t;
+        s.settings.qp.tol_eq = t;
+        s.settings.qp.tol_ineq = t;
+        s.settings.qp.tol_comp = t * 1e-2;
+    }
     let mut x = SVector::from(X0);
     let mut iterations = 0u32;
     let steps = 100;

@@ -18,6 +18,7 @@
 
 use nalgebra::{ArrayStorage, SMatrix};
 
+mod kernels;
 pub mod model;
 pub mod qp;
 pub mod real;

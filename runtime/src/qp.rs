@@ -16,11 +16,16 @@
 
 use nalgebra::{SMatrix, SVector};
 
+use crate::kernels::{mul, tr_mul};
 use crate::real::Real;
 use crate::rows::{BoundError, Rhs, Rows};
 
 type Mat<T, const R: usize, const C: usize> = SMatrix<T, R, C>;
 type Vect<T, const R: usize> = SVector<T, R>;
+
+/// Smallest slack and multiplier of a dual warm start.
+const WARM_T_FLOOR: f64 = 1e-1;
+const WARM_LAM_FLOOR: f64 = 1e-4;
 
 /// Iterations without primal progress after which a QP is declared infeasible.
 const STALL_LIMIT: u32 = 10;
@@ -171,6 +176,10 @@ pub struct QpSettings<T> {
     pub reg: T,
     /// Start from the previous primal solution instead of zero.
     pub warm_start: bool,
+    /// Start from the previous solve's multipliers (bounds and dynamics) when it succeeded.
+    /// Real-time iterations solve one QP per control step whose active set rarely changes;
+    /// there this cuts the iterations to a few.
+    pub warm_start_dual: bool,
     /// Initial complementarity `t lam` of every inequality.
     pub mu0: T,
     /// Iterative-refinement steps per Newton solve (each costs one Riccati back-substitution,
@@ -189,6 +198,7 @@ impl<T: Real> QpSettings<T> {
         tol_comp: T::DEFAULT_TOL_COMP,
         reg: T::DEFAULT_REG,
         warm_start: false,
+        warm_start_dual: false,
         mu0: T::DEFAULT_MU0,
         refine: T::DEFAULT_REFINE,
     };
@@ -312,6 +322,8 @@ pub struct QpSolver<
     du: [Vect<T, NU>; N],
     pi_new: [Vect<T, NX>; N],
     last_alpha: T,
+    /// The multipliers of the last solve are a solution's (usable for a dual warm start).
+    dual_valid: bool,
 }
 
 impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usize, const N: usize>
@@ -364,6 +376,7 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
         du: [crate::zeros(); N],
         pi_new: [crate::zeros(); N],
         last_alpha: T::ZERO,
+        dual_valid: false,
     };
 
     /// Step length of the last interior-point iteration.
@@ -462,24 +475,44 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
         let m_real = T::lit(m.max(1) as f64);
 
         // Starting point.
+        let dual_warm = self.settings.warm_start_dual && self.dual_valid;
         if !self.settings.warm_start {
+            let pi = self.sol.pi;
             self.sol = QpSolution::NEW;
+            if dual_warm {
+                self.sol.pi = pi;
+            }
         }
         if let Some(x) = self.sol.x.first_mut() {
             *x = qp.x0;
         }
         let floor = T::ONE;
         let mu0 = self.settings.mu0;
+        let (t_floor, lam_floor) = (T::lit(WARM_T_FLOOR), T::lit(WARM_LAM_FLOOR));
         for k in 0..N {
             let (x, u) = (self.sol.x[k], self.sol.u[k]);
             let s = &qp.stages[k];
-            self.rx[k].init(&x, floor, mu0);
-            self.ru[k].init(&u, floor, mu0);
-            self.rg[k].init(&(s.c * x + s.d * u), floor, mu0);
+            let g = s.c * x + s.d * u;
+            if dual_warm {
+                self.rx[k].warm_init(&x, t_floor, lam_floor);
+                self.ru[k].warm_init(&u, t_floor, lam_floor);
+                self.rg[k].warm_init(&g, t_floor, lam_floor);
+            } else {
+                self.rx[k].init(&x, floor, mu0);
+                self.ru[k].init(&u, floor, mu0);
+                self.rg[k].init(&g, floor, mu0);
+            }
         }
         let xn = self.sol.xn;
-        self.rxn.init(&xn, floor, mu0);
-        self.rgn.init(&(qp.terminal.c * xn), floor, mu0);
+        let gn = qp.terminal.c * xn;
+        if dual_warm {
+            self.rxn.warm_init(&xn, t_floor, lam_floor);
+            self.rgn.warm_init(&gn, t_floor, lam_floor);
+        } else {
+            self.rxn.init(&xn, floor, mu0);
+            self.rgn.init(&gn, floor, mu0);
+        }
+        self.dual_valid = false;
 
         let st = self.settings;
         let diverge = T::lit(1e12).min(T::ONE / (T::EPSILON * T::EPSILON));
@@ -510,6 +543,7 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
                 && res[2] <= st.tol_ineq
                 && mu <= st.tol_comp
             {
+                self.dual_valid = true;
                 return self.info(QpStatus::Solved, iter, res);
             }
             if self.max_multiplier() > diverge {
@@ -554,6 +588,7 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
         } else {
             QpStatus::MaxIterations
         };
+        self.dual_valid = status == QpStatus::Solved;
         self.info(status, st.max_iter, res)
     }
 
@@ -587,7 +622,7 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
             };
             self.rb[k] = s.a * x + s.b * u + s.f - xnext;
             re = re.max(max_abs(self.rb[k].as_slice()));
-            self.hx[k] = s.q * x + s.s.tr_mul(&u) + s.gx;
+            self.hx[k] = s.q * x + tr_mul(&s.s, &u) + s.gx;
             self.hu[k] = s.r * u + s.s * x + s.gu;
             gscale = gscale.max(self.hu[k].amax());
             if k > 0 {
@@ -602,16 +637,16 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
                 + self.rg[k].complementarity();
             // Stationarity with the current multipliers, and the size of its terms.
             let gd = self.rg[k].dual();
-            let bpi = s.b.tr_mul(&self.sol.pi[k]);
+            let bpi = tr_mul(&s.b, &self.sol.pi[k]);
             let ud = self.ru[k].dual();
-            let dgd = s.d.tr_mul(&gd);
+            let dgd = tr_mul(&s.d, &gd);
             let su = self.hu[k] + bpi - ud - dgd;
             rs = rs.max(max_abs(su.as_slice()));
             gscale = gscale.max(bpi.amax()).max(ud.amax()).max(dgd.amax());
             if k > 0 {
-                let api = s.a.tr_mul(&self.sol.pi[k]);
+                let api = tr_mul(&s.a, &self.sol.pi[k]);
                 let xd = self.rx[k].dual();
-                let cgd = s.c.tr_mul(&gd);
+                let cgd = tr_mul(&s.c, &gd);
                 let sx = self.hx[k] + api - self.sol.pi[k - 1] - xd - cgd;
                 rs = rs.max(max_abs(sx.as_slice()));
                 gscale = gscale
@@ -630,7 +665,7 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
             .max(self.rgn.residuals(&(t.c * xn)));
         comp += self.rxn.complementarity() + self.rgn.complementarity();
         if N > 0 {
-            let (xd, cgd) = (self.rxn.dual(), t.c.tr_mul(&self.rgn.dual()));
+            let (xd, cgd) = (self.rxn.dual(), tr_mul(&t.c, &self.rgn.dual()));
             let sx = self.hxn - self.sol.pi[N - 1] - xd - cgd;
             rs = rs.max(max_abs(sx.as_slice()));
             gscale = gscale
@@ -656,13 +691,13 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
             self.pn[k] = p;
             let sig_g = Mat::<T, NG, NG>::from_diagonal(&self.rg[k].sigma());
             let dts = s.d.transpose() * sig_g;
-            let pa = p * s.a;
-            let pb = p * s.b;
+            let pa = mul(&p, &s.a);
+            let pb = mul(&p, &s.b);
             let mut rbar = s.r
                 + Mat::<T, NU, NU>::from_diagonal(&self.ru[k].sigma())
                 + dts * s.d
-                + s.b.tr_mul(&pb);
-            let sbar = s.s + dts * s.c + s.b.tr_mul(&pa);
+                + tr_mul(&s.b, &pb);
+            let sbar = s.s + dts * s.c + tr_mul(&s.b, &pa);
             // Symmetrize, regularize, factorize; more regularization if it fails.
             rbar = (rbar + rbar.transpose()) * T::lit(0.5);
             let mut reg = self.settings.reg;
@@ -697,7 +732,7 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
                 let qt = s.q
                     + Mat::<T, NX, NX>::from_diagonal(&self.rx[k].sigma())
                     + s.c.transpose() * sig_g * s.c;
-                let pk = qt + s.a.tr_mul(&pa) + sbar.tr_mul(&kmat);
+                let pk = qt + tr_mul(&s.a, &pa) + tr_mul(&sbar, &kmat);
                 p = (pk + pk.transpose()) * T::lit(0.5);
             }
             if !finite_mat(&self.kmat[k]) {
@@ -724,12 +759,12 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
             return;
         }
         let t = &qp.terminal;
-        self.gnt = self.hxn + self.rxn.gradient(rhs) + t.c.tr_mul(&self.rgn.gradient(rhs));
+        self.gnt = self.hxn + self.rxn.gradient(rhs) + tr_mul(&t.c, &self.rgn.gradient(rhs));
         for k in 0..N {
             let s = &qp.stages[k];
             let wg = self.rg[k].gradient(rhs);
-            self.gut[k] = self.hu[k] + self.ru[k].gradient(rhs) + s.d.tr_mul(&wg);
-            self.gxt[k] = self.hx[k] + self.rx[k].gradient(rhs) + s.c.tr_mul(&wg);
+            self.gut[k] = self.hu[k] + self.ru[k].gradient(rhs) + tr_mul(&s.d, &wg);
+            self.gxt[k] = self.hx[k] + self.rx[k].gradient(rhs) + tr_mul(&s.c, &wg);
             self.rbt[k] = self.rb[k];
         }
         self.gx0 = self.gxt;
@@ -760,11 +795,11 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
             let s = &qp.stages[k];
             self.pvn[k] = pv;
             let pb = self.pn[k] * self.rbt[k] + pv;
-            let rbar = self.gut[k] + s.b.tr_mul(&pb);
+            let rbar = self.gut[k] + tr_mul(&s.b, &pb);
             let kv = -self.chol_solve(k, &rbar);
             self.kv[k] = kv;
             if k > 0 {
-                pv = self.gxt[k] + s.a.tr_mul(&pb) + self.sbar[k].tr_mul(&kv);
+                pv = self.gxt[k] + tr_mul(&s.a, &pb) + tr_mul(&self.sbar[k], &kv);
             }
         }
         let mut dx = Vect::<T, NX>::zeros();
@@ -796,23 +831,24 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
             self.gut[k] = s.r * du
                 + s.s * dx
                 + self.ru[k].sigma().component_mul(&du)
-                + s.d.tr_mul(&wg)
+                + tr_mul(&s.d, &wg)
                 + self.gu0[k]
-                + s.b.tr_mul(&pi0[k]);
+                + tr_mul(&s.b, &pi0[k]);
             if k > 0 {
                 self.gxt[k] = s.q * dx
-                    + s.s.tr_mul(&du)
+                    + tr_mul(&s.s, &du)
                     + self.rx[k].sigma().component_mul(&dx)
-                    + s.c.tr_mul(&wg)
+                    + tr_mul(&s.c, &wg)
                     + self.gx0[k]
-                    + s.a.tr_mul(&pi0[k])
+                    + tr_mul(&s.a, &pi0[k])
                     - pi0[k - 1];
             }
             self.rbt[k] = s.a * dx + s.b * du + self.rb[k] - next;
         }
         let wgn = self.rgn.sigma().component_mul(&(t.c * dxn0));
-        self.gnt = t.q * dxn0 + self.rxn.sigma().component_mul(&dxn0) + t.c.tr_mul(&wgn) + self.gn0
-            - pi0[N - 1];
+        self.gnt =
+            t.q * dxn0 + self.rxn.sigma().component_mul(&dxn0) + tr_mul(&t.c, &wgn) + self.gn0
+                - pi0[N - 1];
         self.lq_solve(qp);
         for k in 0..N {
             self.dx[k] += dx0[k];

@@ -130,6 +130,27 @@ impl<T: Real, const K: usize> Rows<T, K> {
         }
     }
 
+    /// Warm start from the multipliers of the previous solve: slacks from the row values
+    /// (at least `t_floor`), multipliers kept (at least `lam_floor`).
+    pub fn warm_init(&mut self, v: &SVector<T, K>, t_floor: T, lam_floor: T) {
+        for i in 0..K {
+            if self.has_lo[i] {
+                self.tl[i] = (v[i] - self.lo[i]).max(t_floor);
+                self.ll[i] = self.ll[i].max(lam_floor);
+            } else {
+                self.tl[i] = T::ONE;
+                self.ll[i] = T::ZERO;
+            }
+            if self.has_hi[i] {
+                self.tu[i] = (self.hi[i] - v[i]).max(t_floor);
+                self.lu[i] = self.lu[i].max(lam_floor);
+            } else {
+                self.tu[i] = T::ONE;
+                self.lu[i] = T::ZERO;
+            }
+        }
+    }
+
     /// Primal residuals `v - lo - t_l` and `hi - v - t_u`; returns their largest magnitude.
     pub fn residuals(&mut self, v: &SVector<T, K>) -> T {
         let mut m = T::ZERO;

@@ -31,9 +31,13 @@ pub struct RtiSettings<T> {
 }
 
 impl<T: Real> RtiSettings<T> {
-    /// Defaults: QP defaults, no shift, 50 SQP iterations to `1e-6` (f64) / `1e-4` (f32).
+    /// Defaults: QP defaults with the dual warm start on (each QP starts from the previous
+    /// control step's multipliers), no shift, 50 SQP iterations to `1e-6` (f64) / `1e-4` (f32).
     pub const DEFAULT: Self = RtiSettings {
-        qp: QpSettings::DEFAULT,
+        qp: QpSettings {
+            warm_start_dual: true,
+            ..QpSettings::DEFAULT
+        },
         shift: false,
         sqp_max_iter: 50,
         sqp_tol: T::SQP_TOL,

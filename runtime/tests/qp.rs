@@ -163,3 +163,38 @@ fn non_finite_data_is_rejected() {
     qp.stages[2].lbu[0] = f64::NEG_INFINITY;
     assert_eq!(solver.solve(&qp).status, QpStatus::Solved);
 }
+
+/// A dual warm start (multipliers of the previous solve) reaches the same solution as a cold
+/// start on a nearby QP, in fewer iterations. Both stop at the default tolerances, which pin
+/// the solution to about 1e-6 (weakly active bounds sit mu / lambda off), hence that bound.
+#[test]
+fn dual_warm_start_gives_the_same_solution_faster() {
+    let qp = random_qp::<10, 4, 0, 0, 20>(11);
+    let mut warm = Box::new(QpSolver::<f64, 10, 4, 0, 0, 20>::NEW);
+    warm.settings.warm_start_dual = true;
+    assert_eq!(warm.solve(&qp).status, QpStatus::Solved);
+    // The next QP: the same with slightly different gradients, as between control steps.
+    let mut next = qp;
+    for s in next.stages.iter_mut() {
+        s.gx *= 1.01;
+        s.gu *= 0.99;
+    }
+    let w = warm.solve(&next);
+    let mut cold = Box::new(QpSolver::<f64, 10, 4, 0, 0, 20>::NEW);
+    let c = cold.solve(&next);
+    assert_eq!((w.status, c.status), (QpStatus::Solved, QpStatus::Solved));
+    assert!(
+        w.iterations < c.iterations,
+        "warm {} vs cold {}",
+        w.iterations,
+        c.iterations
+    );
+    let (ws, cs) = (warm.solution(), cold.solution());
+    for k in 0..20 {
+        let d = (ws.u[k] - cs.u[k]).amax();
+        assert!(
+            d <= 1e-6 * cs.u[k].amax().max(1.0),
+            "stage {k}: {d:e}; {w:?} {c:?}"
+        );
+    }
+}
