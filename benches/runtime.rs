@@ -17,48 +17,18 @@ use std::time::{Duration, Instant};
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{DefaultSettingsBuilder, DefaultSolver, IPSolver, SupportedConeT};
 use criterion::{Criterion, criterion_group, criterion_main};
-use mpc_runtime::{OcpQp, QpSolver, Rti, RtiStatus};
-use nalgebra::{SMatrix, SVector};
+use mpc_runtime::{OcpQp, QpSolver, RtiStatus};
+use nalgebra::SVector;
 
 #[allow(unused_imports)]
 #[path = "../runtime/tests/support/mod.rs"]
 mod support;
 
-use support::quadrotor::{
-    NU, NX, NY, Quadrotor, R_DIAG, U_HI, U_LO, U_REF, X_REF, X0, plant, q_diag,
-};
-
-type Solver<const N: usize> = Rti<f64, Quadrotor<f64>, NX, NU, 0, NY, NX, 0, 0, N>;
-
-fn setup<const N: usize>(dt: f64) -> Box<Solver<N>> {
-    let mut s = Box::new(Solver::<N>::new(Quadrotor { dt }));
-    let mut w = SMatrix::<f64, NY, NY>::zeros();
-    let mut wn = SMatrix::<f64, NX, NX>::zeros();
-    for (i, q) in q_diag().iter().enumerate() {
-        w[(i, i)] = *q;
-        wn[(i, i)] = 5.0 * q;
-    }
-    for (i, r) in R_DIAG.iter().enumerate() {
-        w[(NX + i, NX + i)] = *r;
-    }
-    s.set_weights(&w, &wn).expect("finite weights");
-    let yref = SVector::<f64, NY>::from_fn(|i, _| if i < NX { X_REF[i] } else { U_REF[i - NX] });
-    for k in 0..N {
-        s.set_reference(k, &yref).expect("finite reference");
-    }
-    s.set_terminal_reference(&SVector::from(X_REF))
-        .expect("finite reference");
-    let inf = SVector::<f64, NX>::repeat(f64::INFINITY);
-    s.set_bounds(&-inf, &inf, &SVector::from(U_LO), &SVector::from(U_HI))
-        .expect("bounds");
-    s.set_guess(&SVector::from(X0), &SVector::zeros())
-        .expect("guess");
-    s
-}
+use support::quadrotor::{NU, NX, X0, plant, qrbench};
 
 /// The QP prepared at step `k` of the closed loop.
 fn qp_at<const N: usize>(dt: f64, k: usize) -> OcpQp<f64, NX, NU, 0, 0, N> {
-    let mut s = setup::<N>(dt);
+    let mut s = qrbench::<N>(dt);
     let mut x = SVector::from(X0);
     for _ in 0..k {
         s.prepare();
@@ -109,7 +79,7 @@ fn bench_qp<const N: usize>(c: &mut Criterion, dt: f64) {
 fn bench_rti<const N: usize>(c: &mut Criterion, name: &str, dt: f64, steps: usize) {
     let mut group = c.benchmark_group(format!("rti/{name}"));
     for phase in ["prepare", "feedback", "step"] {
-        let mut s = setup::<N>(dt);
+        let mut s = qrbench::<N>(dt);
         let mut x = SVector::from(X0);
         let mut k = 0;
         group.bench_function(phase, |b| {
@@ -117,7 +87,7 @@ fn bench_rti<const N: usize>(c: &mut Criterion, name: &str, dt: f64, steps: usiz
                 let mut total = Duration::ZERO;
                 for _ in 0..iters {
                     if k == steps {
-                        s = setup::<N>(dt);
+                        s = qrbench::<N>(dt);
                         x = SVector::from(X0);
                         k = 0;
                     }

@@ -10,35 +10,13 @@
 #[path = "../tests/support/quadrotor.rs"]
 mod quadrotor;
 
-use mpc_runtime::{Rti, RtiStatus};
-use nalgebra::{SMatrix, SVector};
-use quadrotor::{NU, NX, NY, Quadrotor, R_DIAG, U_HI, U_LO, U_REF, X_REF, X0, plant, q_diag};
+use mpc_runtime::RtiStatus;
+use nalgebra::SVector;
+use quadrotor::{X0, plant, qrbench};
 
 fn main() {
     let dt = 0.04;
-    let mut s =
-        Box::new(Rti::<f64, Quadrotor<f64>, NX, NU, 0, NY, NX, 0, 0, 10>::new(Quadrotor { dt }));
-    let mut w = SMatrix::<f64, NY, NY>::zeros();
-    let mut wn = SMatrix::<f64, NX, NX>::zeros();
-    for (i, q) in q_diag().iter().enumerate() {
-        w[(i, i)] = *q;
-        wn[(i, i)] = 5.0 * q;
-    }
-    for (i, r) in R_DIAG.iter().enumerate() {
-        w[(NX + i, NX + i)] = *r;
-    }
-    s.set_weights(&w, &wn).expect("finite weights");
-    let yref = SVector::<f64, NY>::from_fn(|i, _| if i < NX { X_REF[i] } else { U_REF[i - NX] });
-    for k in 0..10 {
-        s.set_reference(k, &yref).expect("finite reference");
-    }
-    s.set_terminal_reference(&SVector::from(X_REF))
-        .expect("finite reference");
-    let inf = SVector::<f64, NX>::repeat(f64::INFINITY);
-    s.set_bounds(&-inf, &inf, &SVector::from(U_LO), &SVector::from(U_HI))
-        .expect("bounds");
-    s.set_guess(&SVector::from(X0), &SVector::zeros())
-        .expect("guess");
+    let mut s = qrbench::<10>(dt);
     // Multipliers of the previous control step's QP as the start of the next (the default;
     // COLD=1 turns it off). TOL=1e-6 sets the QP tolerances (complementarity 100x tighter).
     s.settings.qp.warm_start_dual = std::env::var_os("COLD").is_none();

@@ -3,37 +3,9 @@
 
 mod support;
 
-use mpc_runtime::{Rti, RtiStatus};
-use nalgebra::{SMatrix, SVector};
-use support::quadrotor::{
-    NU, NX, NY, Quadrotor, R_DIAG, U_HI, U_LO, U_REF, X_REF, X0, plant, q_diag,
-};
-
-type Solver<const N: usize> = Rti<f64, Quadrotor<f64>, NX, NU, 0, NY, NX, 0, 0, N>;
-
-fn setup<const N: usize>(dt: f64) -> Box<Solver<N>> {
-    let mut s = Box::new(Solver::<N>::new(Quadrotor { dt }));
-    let mut w = SMatrix::<f64, NY, NY>::zeros();
-    let mut wn = SMatrix::<f64, NX, NX>::zeros();
-    for (i, q) in q_diag().iter().enumerate() {
-        w[(i, i)] = *q;
-        wn[(i, i)] = 5.0 * q;
-    }
-    for (i, r) in R_DIAG.iter().enumerate() {
-        w[(NX + i, NX + i)] = *r;
-    }
-    s.set_weights(&w, &wn).unwrap();
-    let yref = SVector::<f64, NY>::from_fn(|i, _| if i < NX { X_REF[i] } else { U_REF[i - NX] });
-    for k in 0..N {
-        s.set_reference(k, &yref).unwrap();
-    }
-    s.set_terminal_reference(&SVector::from(X_REF)).unwrap();
-    let inf = SVector::<f64, NX>::repeat(f64::INFINITY);
-    s.set_bounds(&-inf, &inf, &SVector::from(U_LO), &SVector::from(U_HI))
-        .unwrap();
-    s.set_guess(&SVector::from(X0), &SVector::zeros()).unwrap();
-    s
-}
+use mpc_runtime::RtiStatus;
+use nalgebra::SVector;
+use support::quadrotor::{NU, NX, X0, plant, qrbench};
 
 /// Rows of an anchor CSV: state (10) and control (4, absent in the last row).
 fn anchor(name: &str) -> Vec<(SVector<f64, NX>, Option<SVector<f64, NU>>)> {
@@ -55,7 +27,7 @@ fn anchor(name: &str) -> Vec<(SVector<f64, NX>, Option<SVector<f64, NU>>)> {
 fn closed_loop<const N: usize>(dt: f64, steps: usize, csv: &str) -> SVector<f64, NX> {
     let rows = anchor(csv);
     assert_eq!(rows.len(), steps + 1);
-    let mut s = setup::<N>(dt);
+    let mut s = qrbench::<N>(dt);
     let mut x = SVector::from(X0);
     let mut worst = 0.0f64;
     for (k, (ax, au)) in rows.iter().enumerate() {
@@ -101,7 +73,7 @@ fn config_b_matches_acados_closed_loop() {
 #[test]
 fn rti_tracks_converged_sqp() {
     let dt = 0.04;
-    let mut s = setup::<10>(dt);
+    let mut s = qrbench::<10>(dt);
     s.settings.shift = true;
     let mut x = SVector::from(X0);
     for k in 0..100 {

@@ -9,7 +9,7 @@ use clarabel::algebra::CscMatrix;
 use clarabel::solver::{
     DefaultSettingsBuilder, DefaultSolver, IPSolver, SolverStatus, SupportedConeT,
 };
-use mpc_runtime::{OcpQp, Real};
+use mpc_runtime::OcpQp;
 use nalgebra::{SMatrix, SVector};
 
 /// xorshift64*: deterministic test data from a seed.
@@ -149,99 +149,6 @@ pub fn random_qp_with_witness<
         t.ug[i] = g[i] + rng.uniform(0.0, 0.5);
     }
     (qp, witness)
-}
-
-/// Converts a QP of any precision to f64.
-pub fn to_f64<
-    T: Real,
-    const NX: usize,
-    const NU: usize,
-    const NG: usize,
-    const NGN: usize,
-    const N: usize,
->(
-    qp: &OcpQp<T, NX, NU, NG, NGN, N>,
-) -> OcpQp<f64, NX, NU, NG, NGN, N> {
-    let mut out = OcpQp::<f64, NX, NU, NG, NGN, N>::NEW;
-    let c = |m: &[T], o: &mut [f64]| o.iter_mut().zip(m).for_each(|(a, b)| *a = b.to_f64());
-    c(qp.x0.as_slice(), out.x0.as_mut_slice());
-    for (s, o) in qp.stages.iter().zip(out.stages.iter_mut()) {
-        c(s.q.as_slice(), o.q.as_mut_slice());
-        c(s.s.as_slice(), o.s.as_mut_slice());
-        c(s.r.as_slice(), o.r.as_mut_slice());
-        c(s.gx.as_slice(), o.gx.as_mut_slice());
-        c(s.gu.as_slice(), o.gu.as_mut_slice());
-        c(s.a.as_slice(), o.a.as_mut_slice());
-        c(s.b.as_slice(), o.b.as_mut_slice());
-        c(s.f.as_slice(), o.f.as_mut_slice());
-        c(s.lbx.as_slice(), o.lbx.as_mut_slice());
-        c(s.ubx.as_slice(), o.ubx.as_mut_slice());
-        c(s.lbu.as_slice(), o.lbu.as_mut_slice());
-        c(s.ubu.as_slice(), o.ubu.as_mut_slice());
-        c(s.c.as_slice(), o.c.as_mut_slice());
-        c(s.d.as_slice(), o.d.as_mut_slice());
-        c(s.lg.as_slice(), o.lg.as_mut_slice());
-        c(s.ug.as_slice(), o.ug.as_mut_slice());
-    }
-    let (t, o) = (&qp.terminal, &mut out.terminal);
-    c(t.q.as_slice(), o.q.as_mut_slice());
-    c(t.gx.as_slice(), o.gx.as_mut_slice());
-    c(t.lbx.as_slice(), o.lbx.as_mut_slice());
-    c(t.ubx.as_slice(), o.ubx.as_mut_slice());
-    c(t.c.as_slice(), o.c.as_mut_slice());
-    c(t.lg.as_slice(), o.lg.as_mut_slice());
-    c(t.ug.as_slice(), o.ug.as_mut_slice());
-    out
-}
-
-/// Converts an f64 QP to f32.
-pub fn to_f32<
-    const NX: usize,
-    const NU: usize,
-    const NG: usize,
-    const NGN: usize,
-    const N: usize,
->(
-    qp: &OcpQp<f64, NX, NU, NG, NGN, N>,
-) -> OcpQp<f32, NX, NU, NG, NGN, N> {
-    let mut out = OcpQp::<f32, NX, NU, NG, NGN, N>::NEW;
-    let c = |m: &[f64], o: &mut [f32]| {
-        o.iter_mut().zip(m).for_each(|(a, b)| {
-            *a = if b.abs() >= 1e20 {
-                b.signum() as f32 * 1e20
-            } else {
-                *b as f32
-            }
-        })
-    };
-    c(qp.x0.as_slice(), out.x0.as_mut_slice());
-    for (s, o) in qp.stages.iter().zip(out.stages.iter_mut()) {
-        c(s.q.as_slice(), o.q.as_mut_slice());
-        c(s.s.as_slice(), o.s.as_mut_slice());
-        c(s.r.as_slice(), o.r.as_mut_slice());
-        c(s.gx.as_slice(), o.gx.as_mut_slice());
-        c(s.gu.as_slice(), o.gu.as_mut_slice());
-        c(s.a.as_slice(), o.a.as_mut_slice());
-        c(s.b.as_slice(), o.b.as_mut_slice());
-        c(s.f.as_slice(), o.f.as_mut_slice());
-        c(s.lbx.as_slice(), o.lbx.as_mut_slice());
-        c(s.ubx.as_slice(), o.ubx.as_mut_slice());
-        c(s.lbu.as_slice(), o.lbu.as_mut_slice());
-        c(s.ubu.as_slice(), o.ubu.as_mut_slice());
-        c(s.c.as_slice(), o.c.as_mut_slice());
-        c(s.d.as_slice(), o.d.as_mut_slice());
-        c(s.lg.as_slice(), o.lg.as_mut_slice());
-        c(s.ug.as_slice(), o.ug.as_mut_slice());
-    }
-    let (t, o) = (&qp.terminal, &mut out.terminal);
-    c(t.q.as_slice(), o.q.as_mut_slice());
-    c(t.gx.as_slice(), o.gx.as_mut_slice());
-    c(t.lbx.as_slice(), o.lbx.as_mut_slice());
-    c(t.ubx.as_slice(), o.ubx.as_mut_slice());
-    c(t.c.as_slice(), o.c.as_mut_slice());
-    c(t.lg.as_slice(), o.lg.as_mut_slice());
-    c(t.ug.as_slice(), o.ug.as_mut_slice());
-    out
 }
 
 /// The QP in clarabel's form over `z = (u_0, x_1, u_1, ..., x_{N-1}, u_{N-1}, x_N)`.
