@@ -170,7 +170,9 @@ pub struct QpSettings<T> {
     pub tol_eq: T,
     /// Tolerance on the inequality residual.
     pub tol_ineq: T,
-    /// Tolerance on the average complementarity `t'lam / m`.
+    /// Tolerance on the average complementarity `t'lam / m`, relative to the largest term of
+    /// the stationarity condition (at least 1): multipliers carry the units of the gradient,
+    /// and rounding keeps `t lam` from going below about `eps` times bound times multiplier.
     pub tol_comp: T,
     /// Diagonal regularization added to `R + B'PB` before its Cholesky factorization.
     pub reg: T,
@@ -239,7 +241,7 @@ pub struct QpInfo<T> {
     pub res_eq: T,
     /// Inequality residual.
     pub res_ineq: T,
-    /// Average complementarity.
+    /// Average complementarity, relative to the largest stationarity term (at least 1).
     pub mu: T,
 }
 
@@ -322,6 +324,8 @@ pub struct QpSolver<
     du: [Vect<T, NU>; N],
     pi_new: [Vect<T, NX>; N],
     last_alpha: T,
+    /// Size of the largest stationarity term at the last residual evaluation (at least 1).
+    scale: T,
     /// The multipliers of the last solve are a solution's (usable for a dual warm start).
     dual_valid: bool,
 }
@@ -376,6 +380,7 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
         du: [crate::zeros(); N],
         pi_new: [crate::zeros(); N],
         last_alpha: T::ZERO,
+        scale: T::ONE,
         dual_valid: false,
     };
 
@@ -524,7 +529,8 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
         for iter in 0..st.max_iter {
             res = self.residuals(qp);
             let mu = res[3] / m_real;
-            res[3] = mu;
+            // Reported and tested relative, like the stationarity residual.
+            res[3] = mu / self.scale;
             if !res.iter().all(|r| r.finite()) {
                 return self.info(QpStatus::Infeasible, iter, res);
             }
@@ -541,7 +547,7 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
             if res[0] <= st.tol_stat
                 && res[1] <= st.tol_eq
                 && res[2] <= st.tol_ineq
-                && mu <= st.tol_comp
+                && res[3] <= st.tol_comp
             {
                 self.dual_valid = true;
                 return self.info(QpStatus::Solved, iter, res);
@@ -578,7 +584,7 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
             self.take_step(alpha);
         }
         res = self.residuals(qp);
-        res[3] /= m_real;
+        res[3] /= m_real * self.scale;
         let status = if res[0] <= st.tol_stat
             && res[1] <= st.tol_eq
             && res[2] <= st.tol_ineq
@@ -673,6 +679,7 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
                 .max(xd.amax())
                 .max(cgd.amax());
         }
+        self.scale = gscale;
         [rs / gscale, re, ri, comp]
     }
 

@@ -101,3 +101,28 @@ fn rti_tracks_converged_sqp() {
         x = plant(&x, &u, dt, 10);
     }
 }
+
+/// The same closed loop with the solver in f32 (the microcontroller precision; the plant stays
+/// f64): every QP is solved, and the states stay within 1e-3 of the f64 closed loop at every
+/// step.
+#[test]
+fn config_a_in_f32_follows_f64() {
+    let dt = 0.04;
+    let mut s32 = support::quadrotor::qrbench_in::<f32, 10>(dt);
+    let mut s64 = qrbench::<10>(dt);
+    let (mut x32, mut x64) = (SVector::from(X0), SVector::from(X0));
+    for k in 0..100 {
+        s32.prepare();
+        let (u32_, info) = s32.feedback(&x32.cast());
+        assert_eq!(info.status, RtiStatus::Ok, "f32 step {k}: {info:?}");
+        s64.prepare();
+        let (u64_, _) = s64.feedback(&x64);
+        x32 = plant(&x32, &u32_.cast(), dt, 10);
+        x64 = plant(&x64, &u64_, dt, 10);
+        let d = (x32 - x64).amax();
+        assert!(
+            d <= 1e-3,
+            "step {k}: f32 and f64 closed loops differ by {d:e}"
+        );
+    }
+}

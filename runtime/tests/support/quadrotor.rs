@@ -169,33 +169,44 @@ pub const X0: [f64; NX] = [0.0, 0.0, 2.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
 pub const U_LO: [f64; NU] = [0.0, -20.0, -20.0, -6.0];
 pub const U_HI: [f64; NU] = [20.0, 20.0, 20.0, 6.0];
 
-/// The RTI solver of QR-bench with horizon `N` and step `dt`.
-pub type QrSolver<const N: usize> = Rti<f64, Quadrotor<f64>, NX, NU, 0, NY, NX, 0, 0, N>;
+/// The RTI solver of QR-bench with horizon `N`, in precision `T`.
+pub type QrSolver<T, const N: usize> = Rti<T, Quadrotor<T>, NX, NU, 0, NY, NX, 0, 0, N>;
+
+/// A QR-bench solver in `f64`; see [`qrbench_in`].
+pub fn qrbench<const N: usize>(dt: f64) -> Box<QrSolver<f64, N>> {
+    qrbench_in::<f64, N>(dt)
+}
 
 /// A QR-bench solver: weights `W = diag(Q, R)`, `W_N = 5 Q`, the hover reference at (4, 0, 2)
 /// on every stage, the control bounds, and the first guess `x_k = x0`, `u_k = 0`.
-pub fn qrbench<const N: usize>(dt: f64) -> Box<QrSolver<N>> {
-    let mut s = Box::new(QrSolver::<N>::new(Quadrotor { dt }));
-    let mut w = SMatrix::<f64, NY, NY>::zeros();
-    let mut wn = SMatrix::<f64, NX, NX>::zeros();
+pub fn qrbench_in<T: Real, const N: usize>(dt: f64) -> Box<QrSolver<T, N>> {
+    let c = |v: f64| T::lit(v);
+    let mut s = Box::new(QrSolver::<T, N>::new(Quadrotor { dt: c(dt) }));
+    let mut w = SMatrix::<T, NY, NY>::zeros();
+    let mut wn = SMatrix::<T, NX, NX>::zeros();
     for (i, q) in q_diag().iter().enumerate() {
-        w[(i, i)] = *q;
-        wn[(i, i)] = 5.0 * q;
+        w[(i, i)] = c(*q);
+        wn[(i, i)] = c(5.0 * q);
     }
     for (i, r) in R_DIAG.iter().enumerate() {
-        w[(NX + i, NX + i)] = *r;
+        w[(NX + i, NX + i)] = c(*r);
     }
     s.set_weights(&w, &wn).expect("finite weights");
-    let yref = SVector::<f64, NY>::from_fn(|i, _| if i < NX { X_REF[i] } else { U_REF[i - NX] });
+    let yref = SVector::<T, NY>::from_fn(|i, _| c(if i < NX { X_REF[i] } else { U_REF[i - NX] }));
     for k in 0..N {
         s.set_reference(k, &yref).expect("finite reference");
     }
-    s.set_terminal_reference(&SVector::from(X_REF))
+    s.set_terminal_reference(&SVector::from_fn(|i, _| c(X_REF[i])))
         .expect("finite reference");
-    let inf = SVector::<f64, NX>::repeat(f64::INFINITY);
-    s.set_bounds(&-inf, &inf, &SVector::from(U_LO), &SVector::from(U_HI))
-        .expect("bounds");
-    s.set_guess(&SVector::from(X0), &SVector::zeros())
+    let inf = SVector::<T, NX>::repeat(T::INF);
+    s.set_bounds(
+        &-inf,
+        &inf,
+        &SVector::from_fn(|i, _| c(U_LO[i])),
+        &SVector::from_fn(|i, _| c(U_HI[i])),
+    )
+    .expect("bounds");
+    s.set_guess(&SVector::from_fn(|i, _| c(X0[i])), &SVector::zeros())
         .expect("guess");
     s
 }
