@@ -23,6 +23,12 @@ use crate::rows::{BoundError, Rhs, Rows};
 type Mat<T, const R: usize, const C: usize> = SMatrix<T, R, C>;
 type Vect<T, const R: usize> = SVector<T, R>;
 
+/// The corrector's complementarity target is at least this times the (relative) stationarity
+/// residual: driving complementarity to zero ahead of stationarity leaves the iteration on the
+/// boundary, where the Newton systems are too ill-conditioned to repair stationarity (it
+/// stalled on some random QPs at tight tolerances).
+const MU_PER_STATIONARITY: f64 = 1e-2;
+
 /// Smallest slack and multiplier of a dual warm start.
 const WARM_T_FLOOR: f64 = 1e-1;
 const WARM_LAM_FLOOR: f64 = 1e-4;
@@ -170,9 +176,7 @@ pub struct QpSettings<T> {
     pub tol_eq: T,
     /// Tolerance on the inequality residual.
     pub tol_ineq: T,
-    /// Tolerance on the average complementarity `t'lam / m`, relative to the largest term of
-    /// the stationarity condition (at least 1): multipliers carry the units of the gradient,
-    /// and rounding keeps `t lam` from going below about `eps` times bound times multiplier.
+    /// Tolerance on the average complementarity `t'lam / m`.
     pub tol_comp: T,
     /// Diagonal regularization added to `R + B'PB` before its Cholesky factorization.
     pub reg: T,
@@ -241,7 +245,7 @@ pub struct QpInfo<T> {
     pub res_eq: T,
     /// Inequality residual.
     pub res_ineq: T,
-    /// Average complementarity, relative to the largest stationarity term (at least 1).
+    /// Average complementarity.
     pub mu: T,
 }
 
@@ -324,8 +328,6 @@ pub struct QpSolver<
     du: [Vect<T, NU>; N],
     pi_new: [Vect<T, NX>; N],
     last_alpha: T,
-    /// Size of the largest stationarity term at the last residual evaluation (at least 1).
-    scale: T,
     /// The multipliers of the last solve are a solution's (usable for a dual warm start).
     dual_valid: bool,
 }
@@ -380,7 +382,6 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
         du: [crate::zeros(); N],
         pi_new: [crate::zeros(); N],
         last_alpha: T::ZERO,
-        scale: T::ONE,
         dual_valid: false,
     };
 
@@ -529,8 +530,7 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
         for iter in 0..st.max_iter {
             res = self.residuals(qp);
             let mu = res[3] / m_real;
-            // Reported and tested relative, like the stationarity residual.
-            res[3] = mu / self.scale;
+            res[3] = mu;
             if !res.iter().all(|r| r.finite()) {
                 return self.info(QpStatus::Infeasible, iter, res);
             }
@@ -547,7 +547,7 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
             if res[0] <= st.tol_stat
                 && res[1] <= st.tol_eq
                 && res[2] <= st.tol_ineq
-                && res[3] <= st.tol_comp
+                && mu <= st.tol_comp
             {
                 self.dual_valid = true;
                 return self.info(QpStatus::Solved, iter, res);
@@ -568,7 +568,9 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
             // Corrector. Its complementarity target never goes below a tenth of the
             // tolerance: driving slacks further down only buries them in rounding noise
             // (in f32 that breaks the iteration), and is not needed to stop.
-            let target = (sigma * mu).max(st.tol_comp * T::lit(0.1));
+            let target = (sigma * mu)
+                .max(st.tol_comp * T::lit(0.1))
+                .max(res[0] * T::lit(MU_PER_STATIONARITY));
             // When the predictor is blocked almost at once, its second-order term is a poor
             // prediction and can be huge; leaving it out (plain centering) stops the cycling
             // Mehrotra's method is known for on such steps.
@@ -584,7 +586,7 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
             self.take_step(alpha);
         }
         res = self.residuals(qp);
-        res[3] /= m_real * self.scale;
+        res[3] /= m_real;
         let status = if res[0] <= st.tol_stat
             && res[1] <= st.tol_eq
             && res[2] <= st.tol_ineq
@@ -679,7 +681,6 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
                 .max(xd.amax())
                 .max(cgd.amax());
         }
-        self.scale = gscale;
         [rs / gscale, re, ri, comp]
     }
 

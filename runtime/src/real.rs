@@ -81,7 +81,7 @@ impl Real for f32 {
     const INF: Self = 1e20;
     const NEG_INF: Self = -1e20;
     const DEFAULT_TOL: Self = 1e-5;
-    const DEFAULT_TOL_COMP: Self = 1e-6;
+    const DEFAULT_TOL_COMP: Self = 1e-4;
     const DEFAULT_REG: Self = 1e-6;
     const SIGMA_MAX: Self = 1e8;
     const SQP_TOL: Self = 1e-4;

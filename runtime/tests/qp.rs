@@ -50,9 +50,10 @@ macro_rules! against_clarabel {
                 // pins it to 1e-7; such draws are not judged.
                 prop_assume!(reference.strict_complementarity > 1e-3, "nearly degenerate solution");
                 let mut solver = Box::new(QpSolver::<f64, $nx, $nu, $ng, $ngn, $n>::NEW);
-                // Complementarity decides how close weakly active bounds (small multipliers)
-                // get to their bounds: the distance is about mu / lambda.
-                solver.settings.tol_comp = 1e-13;
+                // Tighter than the defaults: complementarity decides how close weakly active
+                // bounds (small multipliers) get to their bounds, about mu / lambda.
+                solver.settings.tol_stat = 1e-10;
+                solver.settings.tol_comp = 1e-12;
                 let info = solver.solve(&qp);
                 prop_assert_eq!(info.status, QpStatus::Solved, "{:?}", info);
                 let st = solver.settings;
