@@ -142,6 +142,23 @@ fn not_crossed<T: Real, const R: usize>(lo: &SVector<T, R>, hi: &SVector<T, R>) 
     lo.iter().zip(hi.iter()).all(|(l, h)| l <= h)
 }
 
+/// Two pairs of bounds: NaN anywhere is `NonFinite` (checked first), a lower bound above its
+/// upper bound is `CrossedBounds`.
+fn check_bounds<T: Real, const A: usize, const B: usize>(
+    la: &SVector<T, A>,
+    ua: &SVector<T, A>,
+    lb: &SVector<T, B>,
+    ub: &SVector<T, B>,
+) -> Result<(), SetError> {
+    if !(no_nan(la) && no_nan(ua) && no_nan(lb) && no_nan(ub)) {
+        return Err(SetError::NonFinite);
+    }
+    if !(not_crossed(la, ua) && not_crossed(lb, ub)) {
+        return Err(SetError::CrossedBounds);
+    }
+    Ok(())
+}
+
 impl<
     T: Real,
     M: Model<T, NX, NU, NP, NY, NYN, NG, NGN>,
@@ -272,12 +289,7 @@ impl<
         lbu: &SVector<T, NU>,
         ubu: &SVector<T, NU>,
     ) -> Result<(), SetError> {
-        if !(no_nan(lbx) && no_nan(ubx) && no_nan(lbu) && no_nan(ubu)) {
-            return Err(SetError::NonFinite);
-        }
-        if !(not_crossed(lbx, ubx) && not_crossed(lbu, ubu)) {
-            return Err(SetError::CrossedBounds);
-        }
+        check_bounds(lbx, ubx, lbu, ubu)?;
         self.lbx = *lbx;
         self.ubx = *ubx;
         self.lbu = *lbu;
@@ -296,12 +308,7 @@ impl<
         lgn: &SVector<T, NGN>,
         ugn: &SVector<T, NGN>,
     ) -> Result<(), SetError> {
-        if !(no_nan(lg) && no_nan(ug) && no_nan(lgn) && no_nan(ugn)) {
-            return Err(SetError::NonFinite);
-        }
-        if !(not_crossed(lg, ug) && not_crossed(lgn, ugn)) {
-            return Err(SetError::CrossedBounds);
-        }
+        check_bounds(lg, ug, lgn, ugn)?;
         self.lg = *lg;
         self.ug = *ug;
         self.lgn = *lgn;
