@@ -34,6 +34,45 @@ enum Command {
         #[arg(long)]
         variant: Option<String>,
     },
+    /// Generate a solver crate (Rust, `no_std`, with a C header) from a `.mpc` file.
+    Build(BuildArgs),
+}
+
+#[derive(clap::Args)]
+struct BuildArgs {
+    /// The `.mpc` file.
+    file: PathBuf,
+    /// Output directory of the crate (created if needed).
+    #[arg(short, long)]
+    out: PathBuf,
+    /// Apply the file's `variant NAME { ... }` block.
+    #[arg(long)]
+    variant: Option<String>,
+    /// Generate an f32 solver (default f64).
+    #[arg(long)]
+    f32: bool,
+    /// Also build the crate as a staticlib (for C/C++ projects).
+    #[arg(long)]
+    staticlib: bool,
+    /// Crate name and C symbol prefix (default: the model name).
+    #[arg(long)]
+    name: Option<String>,
+    /// Leave out the C ABI module and header.
+    #[arg(long)]
+    no_c_abi: bool,
+    /// QP iteration limit baked into the solver.
+    #[arg(long)]
+    qp_max_iter: Option<u32>,
+    /// QP tolerance (stationarity, equality, inequality) baked into the solver.
+    #[arg(long)]
+    qp_tol: Option<f64>,
+    /// Path of the mpc-runtime crate as written into the generated Cargo.toml, relative to
+    /// the output directory (default: this checkout's runtime/, relative to the output).
+    #[arg(long)]
+    runtime_path: Option<String>,
+    /// Do not write: compare with what is in the output directory, exit 1 on any difference.
+    #[arg(long)]
+    check: bool,
 }
 
 fn main() -> ExitCode {
@@ -48,6 +87,87 @@ fn main() -> ExitCode {
             ExitCode::FAILURE
         }
         Command::Check { file, variant } => check(&file, variant),
+        Command::Build(args) => build(&args),
+    }
+}
+
+/// The runtime crate of this checkout, relative to `out` (`None` if it cannot be expressed).
+fn default_runtime_path(out: &std::path::Path) -> Option<String> {
+    let runtime = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("runtime");
+    let runtime = runtime.canonicalize().ok()?;
+    std::fs::create_dir_all(out).ok()?;
+    let out = out.canonicalize().ok()?;
+    let rel = mpc_codegen::relative_path(&out, &runtime)?;
+    Some(rel.replace('\\', "/"))
+}
+
+fn build(a: &BuildArgs) -> ExitCode {
+    use mpc_codegen::{Options, QpOptions, RuntimeDep, Scalar};
+    let runtime = match &a.runtime_path {
+        Some(p) => RuntimeDep::Path(p.clone()),
+        None => match default_runtime_path(&a.out) {
+            Some(p) => RuntimeDep::Path(p),
+            None => RuntimeDep::default(),
+        },
+    };
+    let opts = Options {
+        scalar: if a.f32 { Scalar::F32 } else { Scalar::F64 },
+        crate_name: a.name.clone(),
+        qp: QpOptions {
+            max_iter: a.qp_max_iter,
+            tol: a.qp_tol,
+            ..QpOptions::default()
+        },
+        shift: None,
+        c_abi: !a.no_c_abi,
+        staticlib: a.staticlib,
+        runtime,
+    };
+    let generated = match mpc_codegen::generate_file(&a.file, a.variant.as_deref(), &opts) {
+        Ok(g) => g,
+        Err(mpc_codegen::CodegenError::Parse(text)) => {
+            eprint!("{text}");
+            return ExitCode::FAILURE;
+        }
+        Err(e) => {
+            eprintln!("error: {}: {e}", a.file.display());
+            return ExitCode::FAILURE;
+        }
+    };
+    if a.check {
+        let stale = generated.check(&a.out);
+        if stale.is_empty() {
+            println!("{}: up to date", a.out.display());
+            return ExitCode::SUCCESS;
+        }
+        for p in &stale {
+            eprintln!(
+                "{}: differs from the generator's output",
+                a.out.join(p).display()
+            );
+        }
+        eprintln!(
+            "regenerate with: mpcc build {} -o {}",
+            a.file.display(),
+            a.out.display()
+        );
+        return ExitCode::FAILURE;
+    }
+    match generated.write(&a.out) {
+        Ok(()) => {
+            for (p, c) in &generated.files {
+                println!(
+                    "wrote {} ({} lines)",
+                    a.out.join(p).display(),
+                    c.lines().count()
+                );
+            }
+            ExitCode::SUCCESS
+        }
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::FAILURE
+        }
     }
 }
 

@@ -1,0 +1,107 @@
+//! Generation options.
+
+/// The scalar type of the generated solver.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum Scalar {
+    /// `f64` (default).
+    #[default]
+    F64,
+    /// `f32` (microcontrollers with a single-precision FPU).
+    F32,
+}
+
+impl Scalar {
+    /// `f64` or `f32`.
+    pub fn rust(self) -> &'static str {
+        match self {
+            Scalar::F64 => "f64",
+            Scalar::F32 => "f32",
+        }
+    }
+
+    /// `double` or `float`.
+    pub fn c(self) -> &'static str {
+        match self {
+            Scalar::F64 => "double",
+            Scalar::F32 => "float",
+        }
+    }
+}
+
+/// QP settings baked into the generated solver (`None`: the runtime's default for the
+/// precision).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct QpOptions {
+    /// Interior-point iteration limit.
+    pub max_iter: Option<u32>,
+    /// Stationarity, equality and inequality tolerance.
+    pub tol: Option<f64>,
+    /// Complementarity tolerance.
+    pub tol_comp: Option<f64>,
+    /// Warm start from the previous step's multipliers (the runtime's RTI default is on).
+    pub warm_start_dual: Option<bool>,
+}
+
+/// How the generated `Cargo.toml` refers to `mpc-runtime`.
+#[derive(Clone, Debug, PartialEq, Eq, Hash)]
+pub enum RuntimeDep {
+    /// A path, relative to the generated crate's directory (written as given).
+    Path(String),
+    /// A version requirement.
+    Version(String),
+}
+
+impl Default for RuntimeDep {
+    fn default() -> Self {
+        RuntimeDep::Version(env!("CARGO_PKG_VERSION").to_string())
+    }
+}
+
+/// Everything that shapes the generated code besides the model.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Options {
+    /// Scalar type.
+    pub scalar: Scalar,
+    /// Crate name (and C symbol prefix); default: the model name.
+    pub crate_name: Option<String>,
+    /// QP settings.
+    pub qp: QpOptions,
+    /// Shift the trajectory before each preparation (the runtime's default is off).
+    pub shift: Option<bool>,
+    /// Emit the C ABI module and header.
+    pub c_abi: bool,
+    /// Build the crate as a `staticlib` too (adds the `std` feature, on by default, which
+    /// links `std` for the panic handler on hosted targets).
+    pub staticlib: bool,
+    /// The `mpc-runtime` dependency of the generated `Cargo.toml`.
+    pub runtime: RuntimeDep,
+}
+
+impl Options {
+    /// Options for a crate with the C ABI, f64.
+    pub fn new() -> Options {
+        Options {
+            c_abi: true,
+            ..Options::default()
+        }
+    }
+
+    /// The crate name for model `model`.
+    pub fn crate_name(&self, model: &str) -> String {
+        self.crate_name.clone().unwrap_or_else(|| model.to_string())
+    }
+
+    /// A stable one-line description, part of the stamp hash.
+    pub(crate) fn describe(&self) -> String {
+        format!(
+            "scalar={} crate={:?} qp={:?} shift={:?} c_abi={} staticlib={} runtime={:?}",
+            self.scalar.rust(),
+            self.crate_name,
+            self.qp,
+            self.shift,
+            self.c_abi,
+            self.staticlib,
+            self.runtime
+        )
+    }
+}

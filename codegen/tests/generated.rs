@@ -1,0 +1,467 @@
+//! The checked-in generated crates (`generated/`) against independent references: the
+//! mpc-dsl interpreter on the model's own expressions, central finite differences of the
+//! generated functions, and acados' closed loop of QR-bench.
+
+#[path = "../../runtime/tests/support/quadrotor.rs"]
+#[allow(dead_code)]
+mod quadrotor;
+
+use std::path::{Path, PathBuf};
+
+use mpc_codegen::{GeneratedCrate, Options, RuntimeDep, Scalar, with_model_file};
+use mpc_dsl::{Expr, Graph, Ocp};
+use nalgebra::{DMatrix, DVector, SMatrix, SVector};
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+/// The checked-in crates: (model file, variant, options, directory). `generated/README.md`
+/// lists the same `mpcc build` commands.
+fn checked_in() -> Vec<(&'static str, Option<&'static str>, Options, &'static str)> {
+    let base = Options {
+        runtime: RuntimeDep::Path("../../runtime".into()),
+        ..Options::new()
+    };
+    vec![
+        (
+            "models/quadrotor_rates.mpc",
+            None,
+            base.clone(),
+            "generated/quadrotor_rates",
+        ),
+        (
+            "models/quadrotor_rates.mpc",
+            Some("A"),
+            Options {
+                scalar: Scalar::F32,
+                crate_name: Some("quadrotor_rates_f32".into()),
+                ..base.clone()
+            },
+            "generated/quadrotor_rates_f32",
+        ),
+        (
+            "models/paper_pointmass.mpc",
+            None,
+            base.clone(),
+            "generated/paper_pointmass",
+        ),
+        (
+            "models/quadrotor_probe.mpc",
+            None,
+            base,
+            "generated/quadrotor_probe",
+        ),
+    ]
+}
+
+fn regenerate(file: &str, variant: Option<&str>, opts: &Options) -> GeneratedCrate {
+    mpc_codegen::generate_file(root().join(file), variant, opts)
+        .unwrap_or_else(|e| panic!("{file}: {e}"))
+}
+
+#[test]
+fn checked_in_crates_are_current_and_generation_is_deterministic() {
+    for (file, variant, opts, dir) in checked_in() {
+        let a = regenerate(file, variant, &opts);
+        let b = regenerate(file, variant, &opts);
+        assert_eq!(a, b, "{file}: two generations differ");
+        let stale = a.check(&root().join(dir));
+        assert!(
+            stale.is_empty(),
+            "{dir}: {stale:?} differ from the generator's output; regenerate with \
+             `cargo run -- build {file} -o {dir}{}` (see generated/README.md)",
+            variant
+                .map(|v| format!(" --variant {v}"))
+                .unwrap_or_default()
+        );
+    }
+}
+
+/// xorshift64*.
+struct Rng(u64);
+
+impl Rng {
+    fn next(&mut self) -> f64 {
+        let mut x = self.0;
+        x ^= x >> 12;
+        x ^= x << 25;
+        x ^= x >> 27;
+        self.0 = x;
+        ((x.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64) / ((1u64 << 53) as f64)
+    }
+    fn range(&mut self, lo: f64, hi: f64) -> f64 {
+        lo + (hi - lo) * self.next()
+    }
+}
+
+fn rel_close(a: f64, b: f64, tol: f64) -> bool {
+    (a - b).abs() <= tol * a.abs().max(b.abs()).max(1.0)
+}
+
+/// Interpreter values of `exprs` with `x`, `u`, `p` bound.
+fn interp<'g>(
+    g: &'g Graph,
+    exprs: &[Expr<'g>],
+    ocp: &Ocp<'g>,
+    x: &[f64],
+    u: &[f64],
+    p: &[f64],
+) -> Vec<f64> {
+    let mut b: Vec<(Expr<'g>, f64)> = Vec::new();
+    b.extend(ocp.x().iter().copied().zip(x.iter().copied()));
+    b.extend(ocp.u().iter().copied().zip(u.iter().copied()));
+    b.extend(ocp.p().iter().copied().zip(p.iter().copied()));
+    g.eval(exprs, &b).unwrap()
+}
+
+/// Central differences of `f` at `z` (step scaled per entry), as a dense matrix.
+fn fd_jacobian(f: impl Fn(&DVector<f64>) -> DVector<f64>, z: &DVector<f64>) -> DMatrix<f64> {
+    let m = f(z).len();
+    let mut j = DMatrix::zeros(m, z.len());
+    for c in 0..z.len() {
+        let h = 1e-6 * z[c].abs().max(1.0);
+        let (mut zp, mut zm) = (z.clone(), z.clone());
+        zp[c] += h;
+        zm[c] -= h;
+        let d = (f(&zp) - f(&zm)) / (2.0 * h);
+        j.set_column(c, &d);
+    }
+    j
+}
+
+fn assert_mat_close(what: &str, a: &DMatrix<f64>, b: &DMatrix<f64>, tol: f64) {
+    assert_eq!(a.shape(), b.shape(), "{what}: shapes");
+    for i in 0..a.nrows() {
+        for j in 0..a.ncols() {
+            assert!(
+                rel_close(a[(i, j)], b[(i, j)], tol),
+                "{what} ({i}, {j}): {} vs {}",
+                a[(i, j)],
+                b[(i, j)]
+            );
+        }
+    }
+}
+
+/// A random state near the flight envelope: unit-ish quaternion, moderate velocities.
+fn random_point(rng: &mut Rng, nx: usize, nu: usize, np: usize) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+    let x = (0..nx).map(|_| rng.range(-1.0, 1.0)).collect();
+    let u = (0..nu).map(|_| rng.range(-2.0, 12.0)).collect();
+    let p = (0..np).map(|_| rng.range(0.1, 2.0)).collect();
+    (x, u, p)
+}
+
+/// `generated/quadrotor_rates`: F equals the interpreter on `Ocp::discrete_map` (1e-12
+/// relative), A and B equal the interpreter on reverse-mode AD of that map (1e-10) and the
+/// finite differences of the generated F (1e-6); the residual and weights equal the model's
+/// cost written out by hand from the `.mpc` file.
+#[test]
+fn quadrotor_rates_functions_match_interpreter_and_finite_differences() {
+    use quadrotor_rates as m;
+    with_model_file(&root().join("models/quadrotor_rates.mpc"), None, |ocp| {
+        let g = ocp.x()[0].graph();
+        let fd_map = ocp.discrete_map()?;
+        let mut wrt = ocp.x().to_vec();
+        wrt.extend(ocp.u().iter().copied());
+        let jac = g.jacobian(&fd_map, &wrt)?.to_dense();
+        let mut rng = Rng(0x9E37_79B9_7F4A_7C15);
+        for _ in 0..50 {
+            let (x, u, p) = random_point(&mut rng, m::NX, m::NU, m::NP);
+            let (xs, us, ps) = (
+                SVector::<f64, { m::NX }>::from_column_slice(&x),
+                SVector::<f64, { m::NU }>::from_column_slice(&u),
+                SVector::<f64, { m::NP }>::from_column_slice(&p),
+            );
+            let (mut a, mut b) = (SMatrix::zeros(), SMatrix::zeros());
+            let f = m::functions::dynamics(&xs, &us, &ps, &mut a, &mut b);
+            let want = interp(g, &fd_map, ocp, &x, &u, &p);
+            for i in 0..m::NX {
+                assert!(
+                    rel_close(f[i], want[i], 1e-12),
+                    "F[{i}]: {} vs {}",
+                    f[i],
+                    want[i]
+                );
+            }
+            let jv = interp(g, jac.as_row_major(), ocp, &x, &u, &p);
+            let nz = m::NX + m::NU;
+            for i in 0..m::NX {
+                for j in 0..nz {
+                    let got = if j < m::NX {
+                        a[(i, j)]
+                    } else {
+                        b[(i, j - m::NX)]
+                    };
+                    assert!(rel_close(got, jv[i * nz + j], 1e-10), "[A B]({i},{j})");
+                }
+            }
+            let z = DVector::from_iterator(nz, x.iter().chain(&u).copied());
+            let fnum = fd_jacobian(
+                |z| {
+                    let xs = SVector::<f64, { m::NX }>::from_fn(|i, _| z[i]);
+                    let us = SVector::<f64, { m::NU }>::from_fn(|i, _| z[m::NX + i]);
+                    let (mut a, mut b) = (SMatrix::zeros(), SMatrix::zeros());
+                    let f = m::functions::dynamics(&xs, &us, &ps, &mut a, &mut b);
+                    DVector::from_column_slice(f.as_slice())
+                },
+                &z,
+            );
+            let mut ab = DMatrix::zeros(m::NX, nz);
+            ab.view_mut((0, 0), (m::NX, m::NX)).copy_from(&a);
+            ab.view_mut((0, m::NX), (m::NX, m::NU)).copy_from(&b);
+            assert_mat_close("[A B] vs finite differences", &ab, &fnum, 1e-6);
+
+            // Residual (x - xref, u - uref): xref = p[0..10], uref = p[10..14].
+            let (mut jx, mut ju) = (SMatrix::zeros(), SMatrix::zeros());
+            let y = m::functions::residual(&xs, &us, &ps, &mut jx, &mut ju);
+            for i in 0..m::NX {
+                assert_eq!(y[i], x[i] - p[i]);
+                assert_eq!(jx[(i, i)], 1.0);
+            }
+            for i in 0..m::NU {
+                assert_eq!(y[m::NX + i], u[i] - p[m::NX + i]);
+                assert_eq!(ju[(m::NX + i, i)], 1.0);
+            }
+            assert_eq!(jx.iter().filter(|&&v| v != 0.0).count(), m::NX);
+            assert_eq!(ju.iter().filter(|&&v| v != 0.0).count(), m::NU);
+        }
+        // W = diag(Q, R), W_N = 5 Q from the file.
+        let q = [100.0, 100.0, 100.0, 10.0, 10.0, 10.0, 10.0, 1.0, 1.0, 1.0];
+        let r = [0.5, 1.0, 1.0, 1.0];
+        let (mut w, mut wn) = (SMatrix::zeros(), SMatrix::zeros());
+        m::functions::weights(&SVector::zeros(), &mut w, &mut wn);
+        let wd: Vec<f64> = q.iter().chain(&r).copied().collect();
+        assert_eq!(
+            w,
+            SMatrix::<f64, 14, 14>::from_diagonal(&SVector::from_column_slice(&wd))
+        );
+        assert_eq!(
+            wn,
+            SMatrix::<f64, 10, 10>::from_diagonal(&SVector::from_column_slice(&q)) * 5.0
+        );
+        assert_eq!(m::LBU, [0.0, -20.0, -20.0, -6.0]);
+        assert_eq!(m::UBU, [20.0, 20.0, 20.0, 6.0]);
+        assert!(m::LBX.iter().all(|v| *v == f64::NEG_INFINITY));
+        Ok(())
+    })
+    .unwrap();
+}
+
+/// `generated/paper_pointmass` (input-rate cost: state augmented with the last control):
+/// F and the residual equal the interpreter on the model's expressions, the augmentation is
+/// `u_last+ = u` and `y` ends with `u - u_last`; Jacobians equal finite differences.
+#[test]
+fn paper_pointmass_functions_match_interpreter() {
+    use paper_pointmass as m;
+    assert_eq!(m::NX, m::NX_MODEL + m::NU);
+    with_model_file(&root().join("models/paper_pointmass.mpc"), None, |ocp| {
+        let g = ocp.x()[0].graph();
+        let fd_map = ocp.discrete_map()?;
+        let xref = &ocp.cost.state.as_ref().unwrap().reference;
+        let mut rng = Rng(77);
+        for _ in 0..30 {
+            let (x, u, p) = random_point(&mut rng, m::NX, m::NU, m::NP);
+            let xm = &x[..m::NX_MODEL];
+            let (xs, us, ps) = (
+                SVector::<f64, { m::NX }>::from_column_slice(&x),
+                SVector::<f64, { m::NU }>::from_column_slice(&u),
+                SVector::<f64, { m::NP }>::from_column_slice(&p),
+            );
+            let (mut a, mut b) = (SMatrix::zeros(), SMatrix::zeros());
+            let f = m::functions::dynamics(&xs, &us, &ps, &mut a, &mut b);
+            let want = interp(g, &fd_map, ocp, xm, &u, &p);
+            for i in 0..m::NX_MODEL {
+                assert!(rel_close(f[i], want[i], 1e-12), "F[{i}]");
+            }
+            for i in 0..m::NU {
+                assert_eq!(f[m::NX_MODEL + i], u[i], "u_last+ = u");
+            }
+            let r = interp(g, xref, ocp, xm, &u, &p);
+            let (mut jx, mut ju) = (SMatrix::zeros(), SMatrix::zeros());
+            let y = m::functions::residual(&xs, &us, &ps, &mut jx, &mut ju);
+            for i in 0..m::NX_MODEL {
+                assert_eq!(y[i], xm[i] - r[i]);
+            }
+            for i in 0..m::NU {
+                assert_eq!(y[m::NX_MODEL + i], u[i] - x[m::NX_MODEL + i]);
+            }
+            let nz = m::NX + m::NU;
+            let z = DVector::from_iterator(nz, x.iter().chain(&u).copied());
+            let split = |z: &DVector<f64>| {
+                (
+                    SVector::<f64, { m::NX }>::from_fn(|i, _| z[i]),
+                    SVector::<f64, { m::NU }>::from_fn(|i, _| z[m::NX + i]),
+                )
+            };
+            let fnum = fd_jacobian(
+                |z| {
+                    let (xs, us) = split(z);
+                    let (mut a, mut b) = (SMatrix::zeros(), SMatrix::zeros());
+                    DVector::from_column_slice(
+                        m::functions::dynamics(&xs, &us, &ps, &mut a, &mut b).as_slice(),
+                    )
+                },
+                &z,
+            );
+            let mut ab = DMatrix::zeros(m::NX, nz);
+            ab.view_mut((0, 0), (m::NX, m::NX)).copy_from(&a);
+            ab.view_mut((0, m::NX), (m::NX, m::NU)).copy_from(&b);
+            assert_mat_close("[A B]", &ab, &fnum, 1e-6);
+            let ynum = fd_jacobian(
+                |z| {
+                    let (xs, us) = split(z);
+                    let (mut jx, mut ju) = (SMatrix::zeros(), SMatrix::zeros());
+                    DVector::from_column_slice(
+                        m::functions::residual(&xs, &us, &ps, &mut jx, &mut ju).as_slice(),
+                    )
+                },
+                &z,
+            );
+            let mut jj = DMatrix::zeros(m::NY, nz);
+            jj.view_mut((0, 0), (m::NY, m::NX)).copy_from(&jx);
+            jj.view_mut((0, m::NX), (m::NY, m::NU)).copy_from(&ju);
+            assert_mat_close("[Jx Ju]", &jj, &ynum, 1e-6);
+        }
+        Ok(())
+    })
+    .unwrap();
+}
+
+/// `generated/quadrotor_rates_f32` (variant A, f32) follows the f64 interpreter to f32
+/// accuracy.
+#[test]
+fn quadrotor_rates_f32_matches_interpreter_in_single_precision() {
+    use quadrotor_rates_f32 as m;
+    assert_eq!((m::N, m::DT), (10, 0.04));
+    with_model_file(
+        &root().join("models/quadrotor_rates.mpc"),
+        Some("A"),
+        |ocp| {
+            let g = ocp.x()[0].graph();
+            let fd_map = ocp.discrete_map()?;
+            let mut rng = Rng(5);
+            for _ in 0..30 {
+                let (x, u, p) = random_point(&mut rng, m::NX, m::NU, m::NP);
+                let c = |v: &[f64]| v.iter().map(|&e| e as f32).collect::<Vec<f32>>();
+                let (mut a, mut b) = (SMatrix::zeros(), SMatrix::zeros());
+                let f = m::functions::dynamics(
+                    &SVector::from_column_slice(&c(&x)),
+                    &SVector::from_column_slice(&c(&u)),
+                    &SVector::from_column_slice(&c(&p)),
+                    &mut a,
+                    &mut b,
+                );
+                let want = interp(g, &fd_map, ocp, &x, &u, &p);
+                for i in 0..m::NX {
+                    assert!(rel_close(f64::from(f[i]), want[i], 1e-5), "F[{i}]");
+                }
+            }
+            Ok(())
+        },
+    )
+    .unwrap();
+}
+
+/// Rows of an acados anchor CSV: state and control (absent in the last row).
+fn anchor(name: &str) -> Vec<(SVector<f64, 10>, Option<SVector<f64, 4>>)> {
+    let path = root().join("runtime/tests/data").join(name);
+    let text = std::fs::read_to_string(&path).unwrap();
+    text.lines()
+        .skip(1)
+        .map(|l| {
+            let v: Vec<f64> = l.split(',').filter_map(|s| s.parse().ok()).collect();
+            let x = SVector::from_fn(|i, _| v[1 + i]);
+            let u = (v.len() >= 15).then(|| SVector::from_fn(|i, _| v[11 + i]));
+            (x, u)
+        })
+        .collect()
+}
+
+/// The whole pipeline, `.mpc` → generated crate → runtime, flies QR-bench config B exactly
+/// as acados does (same algorithm, first guess x_k = x0, u_k = 0, no shift): every state
+/// within 1e-4 of acados' closed loop at every step.
+#[test]
+fn generated_quadrotor_rates_matches_acados_closed_loop() {
+    use quadrotor_rates as m;
+    let rows = anchor("acados_qrbench_B.csv");
+    let mut s = Box::new(m::Solver::new());
+    let x0 = quadrotor::X0;
+    s.set_guess(&x0, &[0.0; 4]).unwrap();
+    let mut x = SVector::from(x0);
+    for (k, (ax, au)) in rows.iter().enumerate() {
+        let dx = (x - ax).amax();
+        assert!(dx <= 1e-4, "step {k}: state differs from acados by {dx:e}");
+        let Some(au) = au else { break };
+        s.prepare();
+        s.set_x0(&x.into()).unwrap();
+        let info = s.feedback();
+        assert_eq!(info.status, m::RtiStatus::Ok, "step {k}: {info:?}");
+        let u = SVector::from(s.u0());
+        assert!(
+            (u - au).amax() <= 2e-3,
+            "step {k}: control {u} vs acados {au}"
+        );
+        x = quadrotor::plant(&x, &u, m::DT, 10);
+    }
+}
+
+/// Named setters: a reference set by name moves the solution as the same entries set in
+/// the raw parameter vector do; non-finite values and bad stages are refused and change
+/// nothing.
+#[test]
+fn named_setters_and_refusals() {
+    use quadrotor_rates as m;
+    let mut a = Box::new(m::Solver::new());
+    let mut b = Box::new(m::Solver::new());
+    let xref = [1.0, 2.0, 3.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+    a.set_xref_all(&xref).unwrap();
+    let mut p = b.param(0).unwrap();
+    p[m::PARAM_XREF].copy_from_slice(&xref);
+    b.set_param_all(&p).unwrap();
+    for s in [&mut a, &mut b] {
+        s.set_x0(&quadrotor::X0).unwrap();
+        s.prepare();
+        assert_eq!(s.feedback().status, m::RtiStatus::Ok);
+    }
+    assert_eq!(a.u0(), b.u0());
+    assert_eq!(a.u0_c(), a.u0()[0]);
+    assert_eq!(a.u0_w(), [a.u0()[1], a.u0()[2], a.u0()[3]]);
+    let before = a.param(3).unwrap();
+    assert_eq!(a.set_xref(3, &[f64::NAN; 10]), Err(m::SetError::NonFinite));
+    assert_eq!(
+        a.set_xref(m::N + 1, &xref),
+        Err(m::SetError::StageOutOfRange)
+    );
+    assert_eq!(a.set_x0(&[f64::INFINITY; 10]), Err(m::SetError::NonFinite));
+    assert_eq!(a.param(3).unwrap(), before);
+    assert!(m::Solver::unconfigured().configure().is_ok());
+}
+
+/// The input-rate cost through the augmented state: with a large rate weight relative to the
+/// tracking weight, the first control stays near the u_prev it is told, and after a
+/// feedback u_prev becomes the control just returned.
+#[test]
+fn paper_pointmass_input_rate_uses_u_prev() {
+    use paper_pointmass as m;
+    let mut s = Box::new(m::Solver::new());
+    let mut xref = [0.0; 9];
+    xref[0] = 1.0;
+    s.set_xref_all(&xref).unwrap();
+    s.set_x0(&[0.0; 9]).unwrap();
+    let run = |s: &mut m::Solver, prev: [f64; 3]| {
+        s.set_u_prev(&prev).unwrap();
+        s.prepare();
+        let info = s.feedback();
+        assert_eq!(info.status, m::RtiStatus::Ok);
+        s.u0()
+    };
+    let u_a = run(&mut s.clone(), [0.0; 3]);
+    let u_b = run(&mut s.clone(), [10.0, 0.0, 0.0]);
+    // The rate term pulls u0 toward u_prev: a larger u_prev gives a larger first jerk.
+    assert!(u_b[0] > u_a[0] + 1e-3, "{u_a:?} vs {u_b:?}");
+    let mut t = s.clone();
+    let u = run(&mut t, [0.0; 3]);
+    let p = t.param(0).unwrap();
+    assert_eq!(&p[m::PARAM_U_PREV], &u[..]);
+}
