@@ -4,6 +4,12 @@
 //! with a Riccati recursion ([`qp`]) and, on top, the real-time-iteration SQP loop ([`rti`])
 //! over a [`Model`] that generated code implements.
 //!
+//! General constraints are hard by default; each row can be made soft with an L1 (exact) and
+//! an L2 penalty on its slacks ([`QpStage::soft_l1`], [`QpStage::soft_l2`] in the QP,
+//! [`Rti::set_soft_penalties`] in the RTI solver). The slacks are eliminated inside the
+//! interior-point iteration row by row, so the Riccati structure is kept; see [`qp`] for the
+//! formulation. Box bounds on states and controls are always hard.
+//!
 //! `#![no_std]`, no heap, no `unsafe`: every workspace is a struct of fixed-size arrays whose
 //! sizes are const generics, with a `const NEW` so it can live in a `static`. Linear algebra on
 //! the small fixed-size blocks is nalgebra's (`SMatrix`, Cholesky), math goes through `libm`.

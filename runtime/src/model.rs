@@ -11,7 +11,8 @@ use crate::real::Real;
 /// `NGN` general terminal constraints. The cost is
 /// `sum_k 1/2 |y(x_k, u_k, p_k) - yref_k|^2_W + 1/2 |y_N(x_N, p_N) - yref_N|^2_{W_N}`
 /// (Gauss-Newton Hessian `J'WJ`), subject to `x_{k+1} = F(x_k, u_k, p_k)`, box bounds on `x`
-/// and `u` and `lg <= h(x, u, p) <= ug`.
+/// and `u` and `lg <= h(x, u, p) <= ug` (hard, or soft with slack penalties: see
+/// [`Rti::set_soft_penalties`](crate::Rti::set_soft_penalties)).
 ///
 /// Every method writes its Jacobians into the given matrices and returns the value; none may
 /// allocate or panic.

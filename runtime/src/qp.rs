@@ -13,12 +13,31 @@
 //! predictor-corrector; each Newton system is a linear-quadratic problem with the Hessian
 //! `H + G' diag(lam/t) G`, solved by a backward Riccati recursion (Cholesky of
 //! `R + B'PB`, `O(N (nx + nu)^3)`), factorized once per iteration and solved twice.
+//!
+//! # Soft general constraints
+//!
+//! A general-constraint row `i` (stage or terminal) with penalties `soft_l1[i] > 0` or
+//! `soft_l2[i] > 0` is soft: each of its present sides gets a slack,
+//!
+//! ```text
+//! min ... + sum_i ( l1_i (sl_i + su_i) + 1/2 l2_i (sl_i^2 + su_i^2) )
+//! s.t. lg_i - sl_i <= C_i x + D_i u <= ug_i + su_i,   sl_i, su_i >= 0
+//! ```
+//!
+//! so the QP is feasible whatever the soft rows' bounds (the L1 term is an exact penalty: a
+//! row whose multiplier would stay below `l1` is met exactly when it can be). Rows with both
+//! penalties zero are hard, as are the box bounds. The slacks are eliminated row by row
+//! inside each Newton system (they are separable), which only changes the diagonal weight
+//! and the gradient the row contributes to `C' D C`, so the Riccati recursion is unchanged;
+//! their stationarity, feasibility and complementarity enter the residuals and the stopping
+//! test. [`QpSolver::slacks`] and [`QpSolver::terminal_slacks`] return them. With no soft row
+//! the arithmetic is that of the hard solver.
 
 use nalgebra::{SMatrix, SVector};
 
 use crate::kernels::{mul, tr_mul};
 use crate::real::Real;
-use crate::rows::{BoundError, Rhs, Rows};
+use crate::rows::{BoundError, Rhs, Rows, Soft};
 
 type Mat<T, const R: usize, const C: usize> = SMatrix<T, R, C>;
 type Vect<T, const R: usize> = SVector<T, R>;
@@ -71,6 +90,12 @@ pub struct QpStage<T: Real, const NX: usize, const NU: usize, const NG: usize> {
     pub lg: Vect<T, NG>,
     /// General constraint upper bound.
     pub ug: Vect<T, NG>,
+    /// Linear (L1, exact) penalty per general-constraint row on each side's slack; must be
+    /// finite and `>= 0`. A row is soft where this or [`soft_l2`](Self::soft_l2) is positive.
+    pub soft_l1: Vect<T, NG>,
+    /// Quadratic (L2) penalty `1/2 l2 s^2` per general-constraint row on each side's slack;
+    /// finite and `>= 0`. Both zero (the default): the row is hard.
+    pub soft_l2: Vect<T, NG>,
 }
 
 /// Data of the terminal stage `N`.
@@ -90,10 +115,16 @@ pub struct QpTerminal<T: Real, const NX: usize, const NGN: usize> {
     pub lg: Vect<T, NGN>,
     /// Terminal general constraint upper bound.
     pub ug: Vect<T, NGN>,
+    /// Linear (L1) slack penalty per terminal general-constraint row (see
+    /// [`QpStage::soft_l1`]).
+    pub soft_l1: Vect<T, NGN>,
+    /// Quadratic (L2) slack penalty per terminal general-constraint row (see
+    /// [`QpStage::soft_l2`]).
+    pub soft_l2: Vect<T, NGN>,
 }
 
 impl<T: Real, const NX: usize, const NU: usize, const NG: usize> QpStage<T, NX, NU, NG> {
-    /// All zeros, bounds absent.
+    /// All zeros, bounds absent, general constraints hard (zero penalties).
     pub const NEW: Self = QpStage {
         q: crate::zeros(),
         s: crate::zeros(),
@@ -111,11 +142,13 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize> QpStage<T, NX, 
         d: crate::zeros(),
         lg: crate::filled(T::NEG_INF),
         ug: crate::filled(T::INF),
+        soft_l1: crate::zeros(),
+        soft_l2: crate::zeros(),
     };
 }
 
 impl<T: Real, const NX: usize, const NGN: usize> QpTerminal<T, NX, NGN> {
-    /// All zeros, bounds absent.
+    /// All zeros, bounds absent, general constraints hard.
     pub const NEW: Self = QpTerminal {
         q: crate::zeros(),
         gx: crate::zeros(),
@@ -124,6 +157,8 @@ impl<T: Real, const NX: usize, const NGN: usize> QpTerminal<T, NX, NGN> {
         c: crate::zeros(),
         lg: crate::filled(T::NEG_INF),
         ug: crate::filled(T::INF),
+        soft_l1: crate::zeros(),
+        soft_l2: crate::zeros(),
     };
 }
 
@@ -226,7 +261,8 @@ pub enum QpStatus {
     MaxIterations = 1,
     /// The constraints cannot be met (crossed bounds, or multipliers diverging).
     Infeasible = 2,
-    /// The input contains NaN or infinite data (other than absent bounds).
+    /// The input contains NaN or infinite data (other than absent bounds), or a negative
+    /// soft-constraint penalty.
     NonFiniteInput = 3,
     /// The Newton system could not be factorized even with increased regularization.
     NumericalError = 4,
@@ -299,6 +335,9 @@ pub struct QpSolver<
     rg: [Rows<T, NG>; N],
     rxn: Rows<T, NX>,
     rgn: Rows<T, NGN>,
+    /// Slacks of the soft general-constraint rows.
+    sg: [Soft<T, NG>; N],
+    sgn: Soft<T, NGN>,
     /// Dynamics residuals `A x + B u + f - x_next`.
     rb: [Vect<T, NX>; N],
     /// `H y + g` per stage (without the inequality terms).
@@ -348,6 +387,11 @@ fn no_nan<T: Real, const R: usize>(v: &Vect<T, R>) -> bool {
     !v.iter().any(|x| x.nan())
 }
 
+/// Soft-constraint penalties are finite and nonnegative.
+fn penalties_ok<T: Real, const R: usize>(v: &Vect<T, R>) -> bool {
+    v.iter().all(|x| x.finite() && *x >= T::ZERO)
+}
+
 impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usize, const N: usize>
     QpSolver<T, NX, NU, NG, NGN, N>
 {
@@ -360,6 +404,8 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
         rg: [Rows::NEW; N],
         rxn: Rows::NEW,
         rgn: Rows::NEW,
+        sg: [Soft::NEW; N],
+        sgn: Soft::NEW,
         rb: [crate::zeros(); N],
         hx: [crate::zeros(); N],
         hu: [crate::zeros(); N],
@@ -395,6 +441,18 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
         &self.sol
     }
 
+    /// Lower and upper slacks `(sl, su)` of stage `k < N`'s general constraints in the last
+    /// solution (zero for hard rows and absent sides); `None` for `k >= N`.
+    pub fn slacks(&self, k: usize) -> Option<(Vect<T, NG>, Vect<T, NG>)> {
+        self.sg.get(k).map(|s| (s.sl, s.su))
+    }
+
+    /// Lower and upper slacks `(sl, su)` of the terminal general constraints in the last
+    /// solution (zero for hard rows and absent sides).
+    pub fn terminal_slacks(&self) -> (Vect<T, NGN>, Vect<T, NGN>) {
+        (self.sgn.sl, self.sgn.su)
+    }
+
     /// Sets the primal starting point used when `settings.warm_start` is on.
     pub fn set_initial_guess(&mut self, guess: &QpSolution<T, NX, NU, N>) {
         self.sol = *guess;
@@ -421,7 +479,7 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
                 && no_nan(&s.ubu)
                 && no_nan(&s.lg)
                 && no_nan(&s.ug);
-            if !(mats && bounds) {
+            if !(mats && bounds && penalties_ok(&s.soft_l1) && penalties_ok(&s.soft_l2)) {
                 return false;
             }
         }
@@ -433,6 +491,8 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
             && no_nan(&t.ubx)
             && no_nan(&t.lg)
             && no_nan(&t.ug)
+            && penalties_ok(&t.soft_l1)
+            && penalties_ok(&t.soft_l2)
     }
 
     fn load_bounds(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N>) -> Result<(), BoundError> {
@@ -443,12 +503,15 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
                 rx.set_bounds(&s.lbx, &s.ubx, k > 0)?;
                 ru.set_bounds(&s.lbu, &s.ubu, true)?;
                 rg.set_bounds(&s.lg, &s.ug, true)?;
+                if let Some(sg) = self.sg.get_mut(k) {
+                    sg.load(&s.soft_l1, &s.soft_l2, rg);
+                }
             }
         }
-        self.rxn
-            .set_bounds(&qp.terminal.lbx, &qp.terminal.ubx, true)?;
-        self.rgn
-            .set_bounds(&qp.terminal.lg, &qp.terminal.ug, true)?;
+        let t = &qp.terminal;
+        self.rxn.set_bounds(&t.lbx, &t.ubx, true)?;
+        self.rgn.set_bounds(&t.lg, &t.ug, true)?;
+        self.sgn.load(&t.soft_l1, &t.soft_l2, &self.rgn);
         Ok(())
     }
 
@@ -476,8 +539,10 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
         let m = self.rx.iter().map(Rows::count).sum::<usize>()
             + self.ru.iter().map(Rows::count).sum::<usize>()
             + self.rg.iter().map(Rows::count).sum::<usize>()
+            + self.sg.iter().map(Soft::count).sum::<usize>()
             + self.rxn.count()
-            + self.rgn.count();
+            + self.rgn.count()
+            + self.sgn.count();
         let m_real = T::lit(m.max(1) as f64);
 
         // Starting point.
@@ -503,10 +568,12 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
                 self.rx[k].warm_init(&x, t_floor, lam_floor);
                 self.ru[k].warm_init(&u, t_floor, lam_floor);
                 self.rg[k].warm_init(&g, t_floor, lam_floor);
+                self.sg[k].warm_init(&mut self.rg[k], &g, t_floor, lam_floor);
             } else {
                 self.rx[k].init(&x, floor, mu0);
                 self.ru[k].init(&u, floor, mu0);
                 self.rg[k].init(&g, floor, mu0);
+                self.sg[k].init(&mut self.rg[k], &g, floor, mu0);
             }
         }
         let xn = self.sol.xn;
@@ -514,9 +581,11 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
         if dual_warm {
             self.rxn.warm_init(&xn, t_floor, lam_floor);
             self.rgn.warm_init(&gn, t_floor, lam_floor);
+            self.sgn.warm_init(&mut self.rgn, &gn, t_floor, lam_floor);
         } else {
             self.rxn.init(&xn, floor, mu0);
             self.rgn.init(&gn, floor, mu0);
+            self.sgn.init(&mut self.rgn, &gn, floor, mu0);
         }
         self.dual_valid = false;
 
@@ -601,21 +670,28 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
     }
 
     fn max_multiplier(&self) -> T {
-        let mut m = self.rxn.max_multiplier().max(self.rgn.max_multiplier());
+        let mut m = self
+            .rxn
+            .max_multiplier()
+            .max(self.rgn.max_multiplier())
+            .max(self.sgn.max_multiplier());
         for k in 0..N {
             m = m
                 .max(self.rx[k].max_multiplier())
                 .max(self.ru[k].max_multiplier())
-                .max(self.rg[k].max_multiplier());
+                .max(self.rg[k].max_multiplier())
+                .max(self.sg[k].max_multiplier());
         }
         m
     }
 
     /// Computes all residuals and `H y + g`; returns
     /// `[stationarity, dynamics, inequality, sum t lam]`. The stationarity residual is relative
-    /// to the largest of its terms (`H y + g`, `A'pi`, `B'pi`, `pi`, the bound multipliers)
-    /// when that exceeds 1: rounding makes it no smaller than about `eps` times that. The
-    /// others are absolute.
+    /// to the largest of its terms (`H y + g`, `A'pi`, `B'pi`, `pi`, the bound multipliers,
+    /// and for soft rows the slack penalty terms and multipliers) when that exceeds 1:
+    /// rounding makes it no smaller than about `eps` times that. The others are absolute;
+    /// soft rows' slacks enter the inequality residual, their stationarity `l1 + l2 s - lam -
+    /// m` the stationarity residual and `s m` the complementarity.
     fn residuals(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N>) -> [T; 4] {
         let (mut rs, mut re, mut ri, mut comp) = (T::ZERO, T::ZERO, T::ZERO, T::ZERO);
         let mut gscale = T::ONE;
@@ -637,12 +713,16 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
                 gscale = gscale.max(self.hx[k].amax());
             }
             ri = ri
-                .max(self.rx[k].residuals(&x))
-                .max(self.ru[k].residuals(&u))
-                .max(self.rg[k].residuals(&(s.c * x + s.d * u)));
+                .max(self.rx[k].residuals(&x, None))
+                .max(self.ru[k].residuals(&u, None))
+                .max(self.rg[k].residuals(&(s.c * x + s.d * u), Some(&self.sg[k])));
             comp += self.rx[k].complementarity()
                 + self.ru[k].complementarity()
-                + self.rg[k].complementarity();
+                + self.rg[k].complementarity()
+                + self.sg[k].complementarity();
+            let (srs, sscale) = self.sg[k].residuals(&self.rg[k]);
+            rs = rs.max(srs);
+            gscale = gscale.max(sscale);
             // Stationarity with the current multipliers, and the size of its terms.
             let gd = self.rg[k].dual();
             let bpi = tr_mul(&s.b, &self.sol.pi[k]);
@@ -669,9 +749,13 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
         self.hxn = t.q * xn + t.gx;
         gscale = gscale.max(self.hxn.amax());
         ri = ri
-            .max(self.rxn.residuals(&xn))
-            .max(self.rgn.residuals(&(t.c * xn)));
-        comp += self.rxn.complementarity() + self.rgn.complementarity();
+            .max(self.rxn.residuals(&xn, None))
+            .max(self.rgn.residuals(&(t.c * xn), Some(&self.sgn)));
+        comp +=
+            self.rxn.complementarity() + self.rgn.complementarity() + self.sgn.complementarity();
+        let (srs, sscale) = self.sgn.residuals(&self.rgn);
+        rs = rs.max(srs);
+        gscale = gscale.max(sscale);
         if N > 0 {
             let (xd, cgd) = (self.rxn.dual(), tr_mul(&t.c, &self.rgn.dual()));
             let sx = self.hxn - self.sol.pi[N - 1] - xd - cgd;
@@ -690,19 +774,19 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
             return true;
         }
         let t = &qp.terminal;
-        let sg = self.rgn.sigma();
+        let sg = self.rgn.sigma(Some(&self.sgn));
         let mut p = t.q
-            + Mat::<T, NX, NX>::from_diagonal(&self.rxn.sigma())
+            + Mat::<T, NX, NX>::from_diagonal(&self.rxn.sigma(None))
             + t.c.transpose() * Mat::<T, NGN, NGN>::from_diagonal(&sg) * t.c;
         for k in (0..N).rev() {
             let s = &qp.stages[k];
             self.pn[k] = p;
-            let sig_g = Mat::<T, NG, NG>::from_diagonal(&self.rg[k].sigma());
+            let sig_g = Mat::<T, NG, NG>::from_diagonal(&self.rg[k].sigma(Some(&self.sg[k])));
             let dts = s.d.transpose() * sig_g;
             let pa = mul(&p, &s.a);
             let pb = mul(&p, &s.b);
             let mut rbar = s.r
-                + Mat::<T, NU, NU>::from_diagonal(&self.ru[k].sigma())
+                + Mat::<T, NU, NU>::from_diagonal(&self.ru[k].sigma(None))
                 + dts * s.d
                 + tr_mul(&s.b, &pb);
             let sbar = s.s + dts * s.c + tr_mul(&s.b, &pa);
@@ -738,7 +822,7 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
             self.kmat[k] = kmat;
             if k > 0 {
                 let qt = s.q
-                    + Mat::<T, NX, NX>::from_diagonal(&self.rx[k].sigma())
+                    + Mat::<T, NX, NX>::from_diagonal(&self.rx[k].sigma(None))
                     + s.c.transpose() * sig_g * s.c;
                 let pk = qt + tr_mul(&s.a, &pa) + tr_mul(&sbar, &kmat);
                 p = (pk + pk.transpose()) * T::lit(0.5);
@@ -767,12 +851,14 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
             return;
         }
         let t = &qp.terminal;
-        self.gnt = self.hxn + self.rxn.gradient(rhs) + tr_mul(&t.c, &self.rgn.gradient(rhs));
+        self.gnt = self.hxn
+            + self.rxn.gradient(rhs, None)
+            + tr_mul(&t.c, &self.rgn.gradient(rhs, Some(&self.sgn)));
         for k in 0..N {
             let s = &qp.stages[k];
-            let wg = self.rg[k].gradient(rhs);
-            self.gut[k] = self.hu[k] + self.ru[k].gradient(rhs) + tr_mul(&s.d, &wg);
-            self.gxt[k] = self.hx[k] + self.rx[k].gradient(rhs) + tr_mul(&s.c, &wg);
+            let wg = self.rg[k].gradient(rhs, Some(&self.sg[k]));
+            self.gut[k] = self.hu[k] + self.ru[k].gradient(rhs, None) + tr_mul(&s.d, &wg);
+            self.gxt[k] = self.hx[k] + self.rx[k].gradient(rhs, None) + tr_mul(&s.c, &wg);
             self.rbt[k] = self.rb[k];
         }
         self.gx0 = self.gxt;
@@ -785,13 +871,13 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
         for k in 0..N {
             let s = &qp.stages[k];
             let (dx, du) = (self.dx[k], self.du[k]);
-            self.rx[k].direction(&dx, rhs);
-            self.ru[k].direction(&du, rhs);
-            self.rg[k].direction(&(s.c * dx + s.d * du), rhs);
+            self.rx[k].direction(&dx, rhs, None);
+            self.ru[k].direction(&du, rhs, None);
+            self.rg[k].direction(&(s.c * dx + s.d * du), rhs, Some(&mut self.sg[k]));
         }
         let dxn = self.dxn;
-        self.rxn.direction(&dxn, rhs);
-        self.rgn.direction(&(t.c * dxn), rhs);
+        self.rxn.direction(&dxn, rhs, None);
+        self.rgn.direction(&(t.c * dxn), rhs, Some(&mut self.sgn));
     }
 
     /// Riccati solve of the linear-quadratic problem with gradients `gxt`, `gut`, `gnt`, and
@@ -835,17 +921,19 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
             let s = &qp.stages[k];
             let (dx, du) = (dx0[k], du0[k]);
             let next = if k + 1 < N { dx0[k + 1] } else { dxn0 };
-            let wg = self.rg[k].sigma().component_mul(&(s.c * dx + s.d * du));
+            let wg = self.rg[k]
+                .sigma(Some(&self.sg[k]))
+                .component_mul(&(s.c * dx + s.d * du));
             self.gut[k] = s.r * du
                 + s.s * dx
-                + self.ru[k].sigma().component_mul(&du)
+                + self.ru[k].sigma(None).component_mul(&du)
                 + tr_mul(&s.d, &wg)
                 + self.gu0[k]
                 + tr_mul(&s.b, &pi0[k]);
             if k > 0 {
                 self.gxt[k] = s.q * dx
                     + tr_mul(&s.s, &du)
-                    + self.rx[k].sigma().component_mul(&dx)
+                    + self.rx[k].sigma(None).component_mul(&dx)
                     + tr_mul(&s.c, &wg)
                     + self.gx0[k]
                     + tr_mul(&s.a, &pi0[k])
@@ -853,9 +941,9 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
             }
             self.rbt[k] = s.a * dx + s.b * du + self.rb[k] - next;
         }
-        let wgn = self.rgn.sigma().component_mul(&(t.c * dxn0));
+        let wgn = self.rgn.sigma(Some(&self.sgn)).component_mul(&(t.c * dxn0));
         self.gnt =
-            t.q * dxn0 + self.rxn.sigma().component_mul(&dxn0) + tr_mul(&t.c, &wgn) + self.gn0
+            t.q * dxn0 + self.rxn.sigma(None).component_mul(&dxn0) + tr_mul(&t.c, &wgn) + self.gn0
                 - pi0[N - 1];
         self.lq_solve(qp);
         for k in 0..N {
@@ -871,9 +959,11 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
             self.rx[k].save_affine();
             self.ru[k].save_affine();
             self.rg[k].save_affine();
+            self.sg[k].save_affine();
         }
         self.rxn.save_affine();
         self.rgn.save_affine();
+        self.sgn.save_affine();
     }
 
     fn max_step(&self, mut alpha: T) -> T {
@@ -881,17 +971,22 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
             alpha = self.rx[k].max_step(alpha);
             alpha = self.ru[k].max_step(alpha);
             alpha = self.rg[k].max_step(alpha);
+            alpha = self.sg[k].max_step(alpha);
         }
         alpha = self.rxn.max_step(alpha);
-        self.rgn.max_step(alpha)
+        alpha = self.rgn.max_step(alpha);
+        self.sgn.max_step(alpha)
     }
 
     fn complementarity_after(&self, alpha: T) -> T {
-        let mut s = self.rxn.complementarity_after(alpha) + self.rgn.complementarity_after(alpha);
+        let mut s = self.rxn.complementarity_after(alpha)
+            + self.rgn.complementarity_after(alpha)
+            + self.sgn.complementarity_after(alpha);
         for k in 0..N {
             s += self.rx[k].complementarity_after(alpha)
                 + self.ru[k].complementarity_after(alpha)
-                + self.rg[k].complementarity_after(alpha);
+                + self.rg[k].complementarity_after(alpha)
+                + self.sg[k].complementarity_after(alpha);
         }
         s
     }
@@ -906,9 +1001,11 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
             self.rx[k].update(alpha);
             self.ru[k].update(alpha);
             self.rg[k].update(alpha);
+            self.sg[k].update(alpha);
         }
         self.sol.xn += self.dxn * alpha;
         self.rxn.update(alpha);
         self.rgn.update(alpha);
+        self.sgn.update(alpha);
     }
 }

@@ -151,8 +151,17 @@ impl<T: Real, const K: usize> Rows<T, K> {
         }
     }
 
-    /// Primal residuals `v - lo - t_l` and `hi - v - t_u`; returns their largest magnitude.
-    pub fn residuals(&mut self, v: &SVector<T, K>) -> T {
+    /// Primal residuals `v - lo - t_l` and `hi - v - t_u` (plus the slack `s_l` / `s_u` of a
+    /// soft side); returns their largest magnitude.
+    #[inline]
+    pub fn residuals(&mut self, v: &SVector<T, K>, soft: Option<&Soft<T, K>>) -> T {
+        match soft {
+            Some(sf) if sf.any => self.residuals_soft(v, sf),
+            _ => self.residuals_hard(v),
+        }
+    }
+
+    fn residuals_hard(&mut self, v: &SVector<T, K>) -> T {
         let mut m = T::ZERO;
         for i in 0..K {
             self.ri_l[i] = if self.has_lo[i] {
@@ -165,6 +174,30 @@ impl<T: Real, const K: usize> Rows<T, K> {
             } else {
                 T::ZERO
             };
+            m = m.max(self.ri_l[i].abs()).max(self.ri_u[i].abs());
+        }
+        m
+    }
+
+    fn residuals_soft(&mut self, v: &SVector<T, K>, sf: &Soft<T, K>) -> T {
+        let mut m = T::ZERO;
+        for i in 0..K {
+            self.ri_l[i] = if self.has_lo[i] {
+                v[i] - self.lo[i] - self.tl[i]
+            } else {
+                T::ZERO
+            };
+            self.ri_u[i] = if self.has_hi[i] {
+                self.hi[i] - v[i] - self.tu[i]
+            } else {
+                T::ZERO
+            };
+            if sf.on_l[i] {
+                self.ri_l[i] += sf.sl[i];
+            }
+            if sf.on_u[i] {
+                self.ri_u[i] += sf.su[i];
+            }
             m = m.max(self.ri_l[i].abs()).max(self.ri_u[i].abs());
         }
         m
@@ -192,17 +225,48 @@ impl<T: Real, const K: usize> Rows<T, K> {
     /// Diagonal `lam_l / t_l + lam_u / t_u` added to the Hessian along each row, capped at
     /// `Real::SIGMA_MAX` so the Riccati recursion stays finite and meaningful in the precision
     /// (a row with that much weight is pinned to its bound anyway).
-    pub fn sigma(&self) -> SVector<T, K> {
+    ///
+    /// A soft side's slack is eliminated: its weight `sig = lam / t` becomes
+    /// `sig zs / (zs + sig)` with `zs = z2 + m / s` (the series connection of the row's
+    /// barrier and the slack's penalty-plus-barrier), see [`Soft`].
+    pub fn sigma(&self, soft: Option<&Soft<T, K>>) -> SVector<T, K> {
         let cap = T::SIGMA_MAX;
         let mut s = SVector::<T, K>::zeros();
-        for i in 0..K {
-            if self.has_lo[i] {
-                s[i] += self.ll[i] / self.tl[i];
+        match soft {
+            Some(sf) if sf.any => {
+                for i in 0..K {
+                    if self.has_lo[i] {
+                        let sig = self.ll[i] / self.tl[i];
+                        s[i] += if sf.on_l[i] {
+                            let (zs, frac) = sf.series_l(i, sig);
+                            zs * frac
+                        } else {
+                            sig
+                        };
+                    }
+                    if self.has_hi[i] {
+                        let sig = self.lu[i] / self.tu[i];
+                        s[i] += if sf.on_u[i] {
+                            let (zs, frac) = sf.series_u(i, sig);
+                            zs * frac
+                        } else {
+                            sig
+                        };
+                    }
+                    s[i] = s[i].min(cap);
+                }
             }
-            if self.has_hi[i] {
-                s[i] += self.lu[i] / self.tu[i];
+            _ => {
+                for i in 0..K {
+                    if self.has_lo[i] {
+                        s[i] += self.ll[i] / self.tl[i];
+                    }
+                    if self.has_hi[i] {
+                        s[i] += self.lu[i] / self.tu[i];
+                    }
+                    s[i] = s[i].min(cap);
+                }
             }
-            s[i] = s[i].min(cap);
         }
         s
     }
@@ -219,8 +283,18 @@ impl<T: Real, const K: usize> Rows<T, K> {
     }
 
     /// The rows' part of the reduced gradient: `g~ += a w` with
-    /// `w = -(lam_l - lam_u) + (rc_l + lam_l ri_l) / t_l - (rc_u + lam_u ri_u) / t_u`.
-    pub fn gradient(&self, rhs: Rhs<T>) -> SVector<T, K> {
+    /// `w = -(lam_l - lam_u) + (rc_l + lam_l ri_l) / t_l - (rc_u + lam_u ri_u) / t_u`,
+    /// plus, for a soft side, the eliminated slack's share `sig b / den` (lower) or
+    /// `-sig b / den` (upper), see [`Soft`].
+    #[inline]
+    pub fn gradient(&self, rhs: Rhs<T>, soft: Option<&Soft<T, K>>) -> SVector<T, K> {
+        match soft {
+            Some(sf) if sf.any => self.gradient_soft(rhs, sf),
+            _ => self.gradient_hard(rhs),
+        }
+    }
+
+    fn gradient_hard(&self, rhs: Rhs<T>) -> SVector<T, K> {
         let mut w = SVector::<T, K>::zeros();
         for i in 0..K {
             let (cl, cu) = self.rc(rhs, i);
@@ -234,8 +308,43 @@ impl<T: Real, const K: usize> Rows<T, K> {
         w
     }
 
-    /// Slack and multiplier directions for a change `dv` of the row values.
-    pub fn direction(&mut self, dv: &SVector<T, K>, rhs: Rhs<T>) {
+    fn gradient_soft(&self, rhs: Rhs<T>, sf: &Soft<T, K>) -> SVector<T, K> {
+        let mut w = SVector::<T, K>::zeros();
+        for i in 0..K {
+            let (cl, cu) = self.rc(rhs, i);
+            if self.has_lo[i] {
+                let el = (cl + self.ll[i] * self.ri_l[i]) / self.tl[i];
+                w[i] += -self.ll[i] + el;
+                if sf.on_l[i] {
+                    let sig = self.ll[i] / self.tl[i];
+                    let (_, frac) = sf.series_l(i, sig);
+                    w[i] += frac * sf.b_l(rhs, i, el);
+                }
+            }
+            if self.has_hi[i] {
+                let eu = (cu + self.lu[i] * self.ri_u[i]) / self.tu[i];
+                w[i] += self.lu[i] - eu;
+                if sf.on_u[i] {
+                    let sig = self.lu[i] / self.tu[i];
+                    let (_, frac) = sf.series_u(i, sig);
+                    w[i] -= frac * sf.b_u(rhs, i, eu);
+                }
+            }
+        }
+        w
+    }
+
+    /// Slack and multiplier directions for a change `dv` of the row values (and those of the
+    /// soft slacks, recovered from `dv`).
+    #[inline]
+    pub fn direction(&mut self, dv: &SVector<T, K>, rhs: Rhs<T>, soft: Option<&mut Soft<T, K>>) {
+        match soft {
+            Some(sf) if sf.any => self.direction_soft(dv, rhs, sf),
+            _ => self.direction_hard(dv, rhs),
+        }
+    }
+
+    fn direction_hard(&mut self, dv: &SVector<T, K>, rhs: Rhs<T>) {
         for i in 0..K {
             let (cl, cu) = self.rc(rhs, i);
             if self.has_lo[i] {
@@ -247,6 +356,43 @@ impl<T: Real, const K: usize> Rows<T, K> {
             }
             if self.has_hi[i] {
                 self.dtu[i] = -dv[i] + self.ri_u[i];
+                self.dlu[i] = -(cu + self.lu[i] * self.dtu[i]) / self.tu[i];
+            } else {
+                self.dtu[i] = T::ZERO;
+                self.dlu[i] = T::ZERO;
+            }
+        }
+    }
+
+    fn direction_soft(&mut self, dv: &SVector<T, K>, rhs: Rhs<T>, sf: &mut Soft<T, K>) {
+        for i in 0..K {
+            let (cl, cu) = self.rc(rhs, i);
+            if self.has_lo[i] {
+                self.dtl[i] = dv[i] + self.ri_l[i];
+                if sf.on_l[i] {
+                    // ds = (b - sig dv) / den, then the row slack moves with it.
+                    let sig = self.ll[i] / self.tl[i];
+                    let el = (cl + self.ll[i] * self.ri_l[i]) / self.tl[i];
+                    let (zs, _) = sf.series_l(i, sig);
+                    let ds = (sf.b_l(rhs, i, el) - sig * dv[i]) / (zs + sig);
+                    sf.set_direction_l(rhs, i, ds);
+                    self.dtl[i] += ds;
+                }
+                self.dll[i] = -(cl + self.ll[i] * self.dtl[i]) / self.tl[i];
+            } else {
+                self.dtl[i] = T::ZERO;
+                self.dll[i] = T::ZERO;
+            }
+            if self.has_hi[i] {
+                self.dtu[i] = -dv[i] + self.ri_u[i];
+                if sf.on_u[i] {
+                    let sig = self.lu[i] / self.tu[i];
+                    let eu = (cu + self.lu[i] * self.ri_u[i]) / self.tu[i];
+                    let (zs, _) = sf.series_u(i, sig);
+                    let ds = (sf.b_u(rhs, i, eu) + sig * dv[i]) / (zs + sig);
+                    sf.set_direction_u(rhs, i, ds);
+                    self.dtu[i] += ds;
+                }
                 self.dlu[i] = -(cu + self.lu[i] * self.dtu[i]) / self.tu[i];
             } else {
                 self.dtu[i] = T::ZERO;
@@ -314,6 +460,380 @@ impl<T: Real, const K: usize> Rows<T, K> {
         let mut m = T::ZERO;
         for i in 0..K {
             m = m.max(self.ll[i]).max(self.lu[i]);
+        }
+        m
+    }
+}
+
+/// Slacks of soft rows (general constraints only), kept beside their [`Rows`].
+///
+/// A soft side has a slack `s >= 0` that relaxes it, `v - lo + s_l - t_l = 0` (lower) or
+/// `hi - v + s_u - t_u = 0` (upper), costs `z1 s + 1/2 z2 s^2`, and has its own
+/// multiplier `m >= 0` with complementarity `s m = mu` (the slack is its own interior-point
+/// slack: its bound is zero). Stationarity in `s` is `r = z1 + z2 s - lam - m = 0`.
+///
+/// Where `z1 = 0` the bound `s >= 0` is redundant (a negative slack would tighten the row and
+/// cost more), and it is left out: the slack is free, `m = 0`, and there is no
+/// complementarity pair. Kept, it would be weakly active (`s = m = 0`) at every satisfied
+/// side and pin the slack only to `sqrt(mu / z2)`; free, `s = lam / z2` exactly.
+///
+/// Each slack appears only in its side's two inequalities, so its Newton equations are
+/// eliminated row by row. For the lower side, with `sig = lam / t`, `e = (rc + lam ri) / t`
+/// (the hard row's terms) and `zs = z2 + m / s`:
+///
+/// ```text
+/// ds = (b - sig dv) / (zs + sig),  b = -r - e - rc_s / s
+/// ```
+///
+/// (upper side: `ds = (b + sig dv) / (zs + sig)`; a free slack has `zs = z2` and no `rc_s`). Substituted back, the row keeps its form
+/// in the Riccati recursion with the weight `sig zs / (zs + sig)` instead of `sig` and the
+/// extra gradient `sig b / (zs + sig)` (upper: its negative), as in HPIPM.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Soft<T: Real, const K: usize> {
+    /// Some side is soft (otherwise every method is a no-op and [`Rows`] runs its hard path).
+    pub any: bool,
+    pub on_l: [bool; K],
+    pub on_u: [bool; K],
+    /// The side's slack is bounded (`s >= 0` with multiplier `m`): `z1 > 0`.
+    bd_l: [bool; K],
+    bd_u: [bool; K],
+    pub z1: SVector<T, K>,
+    pub z2: SVector<T, K>,
+    pub sl: SVector<T, K>,
+    pub su: SVector<T, K>,
+    pub ml: SVector<T, K>,
+    pub mu: SVector<T, K>,
+    rl: SVector<T, K>,
+    ru: SVector<T, K>,
+    dsl: SVector<T, K>,
+    dsu: SVector<T, K>,
+    dml: SVector<T, K>,
+    dmu: SVector<T, K>,
+    asl: SVector<T, K>,
+    asu: SVector<T, K>,
+    aml: SVector<T, K>,
+    amu: SVector<T, K>,
+}
+
+impl<T: Real, const K: usize> Soft<T, K> {
+    pub const NEW: Self = {
+        let z = crate::zeros::<T, K, 1>();
+        Soft {
+            any: false,
+            on_l: [false; K],
+            on_u: [false; K],
+            bd_l: [false; K],
+            bd_u: [false; K],
+            z1: z,
+            z2: z,
+            sl: z,
+            su: z,
+            ml: z,
+            mu: z,
+            rl: z,
+            ru: z,
+            dsl: z,
+            dsu: z,
+            dml: z,
+            dmu: z,
+            asl: z,
+            asu: z,
+            aml: z,
+            amu: z,
+        }
+    };
+
+    /// Takes the penalties (validated by the caller: finite, nonnegative); a row is soft where
+    /// either is positive, and each of its present sides gets a slack.
+    #[inline]
+    pub fn load(&mut self, l1: &SVector<T, K>, l2: &SVector<T, K>, rows: &Rows<T, K>) {
+        self.any = false;
+        for i in 0..K {
+            let soft = l1[i] > T::ZERO || l2[i] > T::ZERO;
+            self.on_l[i] = soft && rows.has_lo[i];
+            self.on_u[i] = soft && rows.has_hi[i];
+            self.any |= self.on_l[i] || self.on_u[i];
+            self.bd_l[i] = self.on_l[i] && l1[i] > T::ZERO;
+            self.bd_u[i] = self.on_u[i] && l1[i] > T::ZERO;
+            self.z1[i] = if soft { l1[i] } else { T::ZERO };
+            self.z2[i] = if soft { l2[i] } else { T::ZERO };
+            if !self.on_l[i] {
+                self.sl[i] = T::ZERO;
+            }
+            if !self.bd_l[i] {
+                self.ml[i] = T::ZERO;
+                self.dml[i] = T::ZERO;
+            }
+            if !self.on_u[i] {
+                self.su[i] = T::ZERO;
+            }
+            if !self.bd_u[i] {
+                self.mu[i] = T::ZERO;
+                self.dmu[i] = T::ZERO;
+            }
+        }
+    }
+
+    /// Number of bounded soft slacks (each adds one complementarity pair).
+    #[inline]
+    pub fn count(&self) -> usize {
+        self.bd_l.iter().chain(&self.bd_u).filter(|&&b| b).count()
+    }
+
+    /// `(zs, sig / (zs + sig))` of the lower side of row `i`: `zs = z2 + m / s` (`z2` for a
+    /// free slack).
+    #[inline]
+    pub fn series_l(&self, i: usize, sig: T) -> (T, T) {
+        let zs = if self.bd_l[i] {
+            self.z2[i] + self.ml[i] / self.sl[i]
+        } else {
+            self.z2[i]
+        };
+        (zs, sig / (zs + sig))
+    }
+
+    /// [`series_l`](Self::series_l) of the upper side.
+    #[inline]
+    pub fn series_u(&self, i: usize, sig: T) -> (T, T) {
+        let zs = if self.bd_u[i] {
+            self.z2[i] + self.mu[i] / self.su[i]
+        } else {
+            self.z2[i]
+        };
+        (zs, sig / (zs + sig))
+    }
+
+    fn rc(rhs: Rhs<T>, s: T, m: T, a_s: T, a_m: T) -> T {
+        match rhs {
+            Rhs::Affine => s * m,
+            Rhs::Corrector(target, w) => s * m + w * a_s * a_m - target,
+        }
+    }
+
+    /// `b = -r - e - rc_s / s` of the lower side of row `i` (`-r - e` for a free slack), `e`
+    /// being the row's own term.
+    #[inline]
+    pub fn b_l(&self, rhs: Rhs<T>, i: usize, e: T) -> T {
+        if self.bd_l[i] {
+            let c = Self::rc(rhs, self.sl[i], self.ml[i], self.asl[i], self.aml[i]);
+            -self.rl[i] - e - c / self.sl[i]
+        } else {
+            -self.rl[i] - e
+        }
+    }
+
+    /// [`b_l`](Self::b_l) of the upper side.
+    #[inline]
+    pub fn b_u(&self, rhs: Rhs<T>, i: usize, e: T) -> T {
+        if self.bd_u[i] {
+            let c = Self::rc(rhs, self.su[i], self.mu[i], self.asu[i], self.amu[i]);
+            -self.ru[i] - e - c / self.su[i]
+        } else {
+            -self.ru[i] - e
+        }
+    }
+
+    /// Sets the lower slack's direction and its multiplier's.
+    #[inline]
+    pub fn set_direction_l(&mut self, rhs: Rhs<T>, i: usize, ds: T) {
+        self.dsl[i] = ds;
+        if self.bd_l[i] {
+            let c = Self::rc(rhs, self.sl[i], self.ml[i], self.asl[i], self.aml[i]);
+            self.dml[i] = -(c + self.ml[i] * ds) / self.sl[i];
+        }
+    }
+
+    /// Sets the upper slack's direction and its multiplier's.
+    #[inline]
+    pub fn set_direction_u(&mut self, rhs: Rhs<T>, i: usize, ds: T) {
+        self.dsu[i] = ds;
+        if self.bd_u[i] {
+            let c = Self::rc(rhs, self.su[i], self.mu[i], self.asu[i], self.amu[i]);
+            self.dmu[i] = -(c + self.mu[i] * ds) / self.su[i];
+        }
+    }
+
+    /// Starting slack of a side with row value `v`, bound `lo` (for the upper side pass
+    /// `-v`, `-hi`): it covers the violation, `s = max(floor, lo - v + floor)` (bounded) or
+    /// `max(0, lo - v + floor)` (free), so the row slack `t = v - lo + s` is at least `floor`.
+    fn start(bounded: bool, v: T, lo: T, floor: T) -> T {
+        let cover = lo - v + floor;
+        if bounded {
+            floor.max(cover)
+        } else {
+            cover.max(T::ZERO)
+        }
+    }
+
+    /// Cold start after [`Rows::init`]: slacks from [`start`](Self::start), row slacks
+    /// `t = v - lo + s` (at least `floor`), multipliers `mu0 / slack`.
+    #[inline]
+    pub fn init(&mut self, rows: &mut Rows<T, K>, v: &SVector<T, K>, floor: T, mu0: T) {
+        if K == 0 || !self.any {
+            return;
+        }
+        for i in 0..K {
+            if self.on_l[i] {
+                self.sl[i] = Self::start(self.bd_l[i], v[i], rows.lo[i], floor);
+                rows.tl[i] = (v[i] - rows.lo[i] + self.sl[i]).max(floor);
+                rows.ll[i] = mu0 / rows.tl[i];
+                if self.bd_l[i] {
+                    self.ml[i] = mu0 / self.sl[i];
+                }
+            }
+            if self.on_u[i] {
+                self.su[i] = Self::start(self.bd_u[i], -v[i], -rows.hi[i], floor);
+                rows.tu[i] = (rows.hi[i] - v[i] + self.su[i]).max(floor);
+                rows.lu[i] = mu0 / rows.tu[i];
+                if self.bd_u[i] {
+                    self.mu[i] = mu0 / self.su[i];
+                }
+            }
+        }
+    }
+
+    /// Warm start after [`Rows::warm_init`]: slacks as in [`init`](Self::init) with
+    /// `t_floor`, multipliers kept (at least `lam_floor`).
+    #[inline]
+    pub fn warm_init(
+        &mut self,
+        rows: &mut Rows<T, K>,
+        v: &SVector<T, K>,
+        t_floor: T,
+        lam_floor: T,
+    ) {
+        if K == 0 || !self.any {
+            return;
+        }
+        for i in 0..K {
+            if self.on_l[i] {
+                self.sl[i] = Self::start(self.bd_l[i], v[i], rows.lo[i], t_floor);
+                rows.tl[i] = (v[i] - rows.lo[i] + self.sl[i]).max(t_floor);
+                if self.bd_l[i] {
+                    self.ml[i] = self.ml[i].max(lam_floor);
+                }
+            }
+            if self.on_u[i] {
+                self.su[i] = Self::start(self.bd_u[i], -v[i], -rows.hi[i], t_floor);
+                rows.tu[i] = (rows.hi[i] - v[i] + self.su[i]).max(t_floor);
+                if self.bd_u[i] {
+                    self.mu[i] = self.mu[i].max(lam_floor);
+                }
+            }
+        }
+    }
+
+    /// Stationarity in the slacks, `z1 + z2 s - lam - m`, with the rows' multipliers; returns
+    /// its largest magnitude and the largest of its terms.
+    #[inline]
+    pub fn residuals(&mut self, rows: &Rows<T, K>) -> (T, T) {
+        let (mut r, mut scale) = (T::ZERO, T::ZERO);
+        if K == 0 || !self.any {
+            return (r, scale);
+        }
+        for i in 0..K {
+            if self.on_l[i] {
+                let q = self.z2[i] * self.sl[i];
+                self.rl[i] = self.z1[i] + q - rows.ll[i] - self.ml[i];
+                r = r.max(self.rl[i].abs());
+                scale = scale.max(self.z1[i]).max(q).max(rows.ll[i]).max(self.ml[i]);
+            }
+            if self.on_u[i] {
+                let q = self.z2[i] * self.su[i];
+                self.ru[i] = self.z1[i] + q - rows.lu[i] - self.mu[i];
+                r = r.max(self.ru[i].abs());
+                scale = scale.max(self.z1[i]).max(q).max(rows.lu[i]).max(self.mu[i]);
+            }
+        }
+        (r, scale)
+    }
+
+    /// `sum s m` over bounded soft slacks.
+    #[inline]
+    pub fn complementarity(&self) -> T {
+        self.complementarity_after(T::ZERO)
+    }
+
+    /// `sum (s + alpha ds)(m + alpha dm)` over bounded soft slacks.
+    #[inline]
+    pub fn complementarity_after(&self, alpha: T) -> T {
+        let mut c = T::ZERO;
+        if K == 0 || !self.any {
+            return c;
+        }
+        for i in 0..K {
+            if self.bd_l[i] {
+                c += (self.sl[i] + alpha * self.dsl[i]) * (self.ml[i] + alpha * self.dml[i]);
+            }
+            if self.bd_u[i] {
+                c += (self.su[i] + alpha * self.dsu[i]) * (self.mu[i] + alpha * self.dmu[i]);
+            }
+        }
+        c
+    }
+
+    /// Largest step in `(0, alpha]` keeping every bounded soft slack and its multiplier
+    /// nonnegative.
+    #[inline]
+    pub fn max_step(&self, mut alpha: T) -> T {
+        if K == 0 || !self.any {
+            return alpha;
+        }
+        let pairs = [
+            (&self.sl, &self.dsl, &self.bd_l),
+            (&self.ml, &self.dml, &self.bd_l),
+            (&self.su, &self.dsu, &self.bd_u),
+            (&self.mu, &self.dmu, &self.bd_u),
+        ];
+        for (v, d, on) in pairs {
+            for i in 0..K {
+                if on[i] && d[i] < T::ZERO {
+                    alpha = alpha.min(-v[i] / d[i]);
+                }
+            }
+        }
+        alpha
+    }
+
+    /// Keeps the current direction as the predictor.
+    #[inline]
+    pub fn save_affine(&mut self) {
+        if K == 0 || !self.any {
+            return;
+        }
+        self.asl = self.dsl;
+        self.asu = self.dsu;
+        self.aml = self.dml;
+        self.amu = self.dmu;
+    }
+
+    /// Takes the step.
+    #[inline]
+    pub fn update(&mut self, alpha: T) {
+        if K == 0 || !self.any {
+            return;
+        }
+        for i in 0..K {
+            if self.on_l[i] {
+                self.sl[i] += alpha * self.dsl[i];
+                self.ml[i] += alpha * self.dml[i];
+            }
+            if self.on_u[i] {
+                self.su[i] += alpha * self.dsu[i];
+                self.mu[i] += alpha * self.dmu[i];
+            }
+        }
+    }
+
+    /// Largest slack multiplier (divergence check).
+    #[inline]
+    pub fn max_multiplier(&self) -> T {
+        let mut m = T::ZERO;
+        if K == 0 || !self.any {
+            return m;
+        }
+        for i in 0..K {
+            m = m.max(self.ml[i]).max(self.mu[i]);
         }
         m
     }

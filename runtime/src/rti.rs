@@ -6,6 +6,12 @@
 //! QP, update the trajectory, return `u_0`). If the QP fails, the previous successful plan,
 //! shifted by the number of steps since, is returned and the status says so; a non-finite
 //! control is never returned, and non-finite inputs are rejected before they touch any state.
+//!
+//! General constraints `lg <= h(x, u, p) <= ug` can be softened row by row with
+//! [`Rti::set_soft_penalties`] (L1 and L2 slack penalties, copied into every stage's QP by
+//! [`Rti::prepare`]): a plan that must violate them (say, an initial state outside a state
+//! constraint) is then still a solution, not an infeasible QP and a fallback. The full-SQP
+//! merit function weights a soft row's violation by its penalties.
 
 use nalgebra::{SMatrix, SVector};
 
@@ -80,6 +86,8 @@ pub enum SetError {
     StageOutOfRange,
     /// A lower bound exceeds its upper bound.
     CrossedBounds,
+    /// A soft-constraint penalty is negative.
+    NegativePenalty,
 }
 
 /// A real-time-iteration NMPC solver for model `M` with horizon `N`.
@@ -119,6 +127,12 @@ pub struct Rti<
     ug: SVector<T, NG>,
     lgn: SVector<T, NGN>,
     ugn: SVector<T, NGN>,
+    l1: SVector<T, NG>,
+    l2: SVector<T, NG>,
+    l1n: SVector<T, NGN>,
+    l2n: SVector<T, NGN>,
+    /// Some penalty is positive (the merit function then evaluates the constraints).
+    any_soft: bool,
     plan: [SVector<T, NU>; N],
     plan_age: usize,
     prepared: bool,
@@ -159,6 +173,36 @@ fn check_bounds<T: Real, const A: usize, const B: usize>(
     Ok(())
 }
 
+/// Slack cost of constraint values `h` against `lo <= h <= hi` for the soft rows (penalties
+/// `l1`, `l2`; rows with both zero are skipped): `l1 v + 1/2 l2 v^2` per violated side.
+fn soft_penalty<T: Real, const K: usize>(
+    h: &SVector<T, K>,
+    lo: &SVector<T, K>,
+    hi: &SVector<T, K>,
+    l1: &SVector<T, K>,
+    l2: &SVector<T, K>,
+) -> T {
+    let mut c = T::ZERO;
+    for i in 0..K {
+        if !(l1[i] > T::ZERO || l2[i] > T::ZERO) {
+            continue;
+        }
+        // Absent bounds (at or beyond `Real::INF`) are never violated.
+        let vl = if lo[i] > -T::INF {
+            (lo[i] - h[i]).max(T::ZERO)
+        } else {
+            T::ZERO
+        };
+        let vu = if hi[i] < T::INF {
+            (h[i] - hi[i]).max(T::ZERO)
+        } else {
+            T::ZERO
+        };
+        c += l1[i] * (vl + vu) + l2[i] * (vl * vl + vu * vu) * T::lit(0.5);
+    }
+    c
+}
+
 impl<
     T: Real,
     M: Model<T, NX, NU, NP, NY, NYN, NG, NGN>,
@@ -197,6 +241,11 @@ impl<
             ug: crate::filled(T::INF),
             lgn: crate::filled(T::NEG_INF),
             ugn: crate::filled(T::INF),
+            l1: crate::zeros(),
+            l2: crate::zeros(),
+            l1n: crate::zeros(),
+            l2n: crate::zeros(),
+            any_soft: false,
             plan: [crate::zeros(); N],
             plan_age: 0,
             prepared: false,
@@ -316,6 +365,45 @@ impl<
         Ok(())
     }
 
+    /// Sets the slack penalties of the general constraints: row `i` of the stage constraints
+    /// costs `l1[i] (sl + su) + 1/2 l2[i] (sl^2 + su^2)` for slacks `sl, su >= 0` that relax
+    /// `lg - sl <= h(x, u, p) <= ug + su` (likewise `l1n`, `l2n` for the terminal rows). A row
+    /// with both penalties zero (the default) is hard; box bounds are always hard. The L1
+    /// penalty is exact: a row whose constraint can be met is met when `l1` exceeds the
+    /// row's multiplier. Applied to every stage by the next [`prepare`](Self::prepare) (or
+    /// [`solve_sqp`](Self::solve_sqp)), whose merit function includes the penalties.
+    ///
+    /// # Errors
+    /// [`SetError::NonFinite`] if a penalty is NaN or infinite (checked first),
+    /// [`SetError::NegativePenalty`] if one is negative. Nothing changes on error.
+    pub fn set_soft_penalties(
+        &mut self,
+        l1: &SVector<T, NG>,
+        l2: &SVector<T, NG>,
+        l1n: &SVector<T, NGN>,
+        l2n: &SVector<T, NGN>,
+    ) -> Result<(), SetError> {
+        if !(all_finite(l1) && all_finite(l2) && all_finite(l1n) && all_finite(l2n)) {
+            return Err(SetError::NonFinite);
+        }
+        let nonneg = |v: &[T]| v.iter().all(|x| *x >= T::ZERO);
+        if !(nonneg(l1.as_slice())
+            && nonneg(l2.as_slice())
+            && nonneg(l1n.as_slice())
+            && nonneg(l2n.as_slice()))
+        {
+            return Err(SetError::NegativePenalty);
+        }
+        self.l1 = *l1;
+        self.l2 = *l2;
+        self.l1n = *l1n;
+        self.l2n = *l2n;
+        let pos = |v: &[T]| v.iter().any(|x| *x > T::ZERO);
+        self.any_soft =
+            pos(l1.as_slice()) || pos(l2.as_slice()) || pos(l1n.as_slice()) || pos(l2n.as_slice());
+        Ok(())
+    }
+
     /// Sets the whole trajectory guess: `x_k` for every `k <= N` and `u_k` for every `k < N`.
     ///
     /// # Errors
@@ -401,6 +489,8 @@ impl<
             let h = self.model.constraints(&x, &u, &p, &mut s.c, &mut s.d);
             s.lg = self.lg - h;
             s.ug = self.ug - h;
+            s.soft_l1 = self.l1;
+            s.soft_l2 = self.l2;
         }
         let (xn, pn) = (self.xn, self.pn);
         let t = &mut self.qp.terminal;
@@ -414,6 +504,8 @@ impl<
         let h = self.model.terminal_constraints(&xn, &pn, &mut t.c);
         t.lg = self.lgn - h;
         t.ug = self.ugn - h;
+        t.soft_l1 = self.l1n;
+        t.soft_l2 = self.l2n;
     }
 
     /// Feedback phase: embeds the measured state, solves the QP prepared by
@@ -501,7 +593,10 @@ impl<
         self.xn = self.xnt;
     }
 
-    /// Merit function `cost + nu * (sum |dynamics defect|_1)` at the current trajectory.
+    /// Merit function `cost + penalty + nu * (sum |dynamics defect|_1)` at the current
+    /// trajectory, where `penalty` is the soft rows' slack cost at their violation
+    /// `v = max(lg - h, 0)`, `max(h - ug, 0)`: `l1 v + 1/2 l2 v^2` per side (the QP's objective
+    /// at its optimal slacks; hard rows do not enter).
     fn merit(&self, nu: T) -> T {
         let mut cost = T::ZERO;
         let mut defect = T::ZERO;
@@ -516,16 +611,27 @@ impl<
             cost += r.dot(&(self.w * r)) * T::lit(0.5);
             let d = self.model.dynamics(x, u, p, &mut a, &mut b) - next;
             defect += d.abs().sum();
+            if self.any_soft {
+                let mut cx = SMatrix::<T, NG, NX>::zeros();
+                let mut cu = SMatrix::<T, NG, NU>::zeros();
+                let h = self.model.constraints(x, u, p, &mut cx, &mut cu);
+                cost += soft_penalty(&h, &self.lg, &self.ug, &self.l1, &self.l2);
+            }
         }
         let mut jn = SMatrix::<T, NYN, NX>::zeros();
         let r = self.model.terminal_residual(&self.xn, &self.pn, &mut jn) - self.yref_n;
         cost += r.dot(&(self.wn * r)) * T::lit(0.5);
+        if self.any_soft {
+            let mut cx = SMatrix::<T, NGN, NX>::zeros();
+            let h = self.model.terminal_constraints(&self.xn, &self.pn, &mut cx);
+            cost += soft_penalty(&h, &self.lgn, &self.ugn, &self.l1n, &self.l2n);
+        }
         cost + nu * defect
     }
 
     /// Full SQP from the current trajectory with `x_0` fixed to `x0`: Gauss-Newton steps with a
-    /// line search on an exact L1 merit function (`cost + nu |dynamics defects|_1`, `nu` twice
-    /// the largest dynamics multiplier), until the largest entry of the QP step is below
+    /// line search on an exact L1 merit function (`cost + soft-constraint penalties +
+    /// nu |dynamics defects|_1`, `nu` twice the largest dynamics multiplier), until the largest entry of the QP step is below
     /// `settings.sqp_tol` or `settings.sqp_max_iter` iterations. For offline planning and
     /// tests. The trajectory is left at the last accepted iterate.
     pub fn solve_sqp(&mut self, x0: &SVector<T, NX>) -> RtiInfo<T> {

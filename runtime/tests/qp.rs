@@ -1,13 +1,14 @@
 //! The Riccati interior-point QP solver against clarabel (an independent general-purpose
 //! conic solver, given the same QP in full sparse form), against the closed-form LQR, and on
-//! infeasible and non-finite input.
+//! infeasible and non-finite input; soft general constraints against clarabel (slacks written
+//! out as variables), against closed-form minimizers, and on contradictory constraints.
 
 mod support;
 
 use mpc_runtime::{OcpQp, QpSolver, QpStatus};
 use nalgebra::{SMatrix, SVector};
 use proptest::prelude::*;
-use support::{Reference, clarabel_solve, random_qp};
+use support::{Reference, clarabel_solve, random_qp, random_soft_qp};
 
 /// Largest difference between our solution and a reference, relative to the solution's size.
 fn compare<const NX: usize, const NU: usize>(
@@ -73,6 +74,273 @@ against_clarabel!(small_n5, 2, 1, 1, 0, 5);
 against_clarabel!(medium_n10, 4, 2, 2, 1, 10);
 against_clarabel!(qrbench_sized_n20, 10, 4, 0, 0, 20);
 against_clarabel!(large_n30, 12, 5, 3, 2, 30);
+
+/// Largest difference between our slacks and clarabel's, relative to the solution's size.
+fn compare_slacks<
+    const NX: usize,
+    const NU: usize,
+    const NG: usize,
+    const NGN: usize,
+    const N: usize,
+>(
+    reference: &Reference<NX, NU>,
+    solver: &QpSolver<f64, NX, NU, NG, NGN, N>,
+) -> f64 {
+    let scale = reference
+        .u
+        .iter()
+        .map(|v| v.amax())
+        .chain(reference.x.iter().map(|v| v.amax()))
+        .chain(reference.sl.iter().flatten().map(|v| v.abs()))
+        .chain(reference.su.iter().flatten().map(|v| v.abs()))
+        .fold(1.0f64, f64::max);
+    let mut worst = 0.0f64;
+    for k in 0..=N {
+        let (sl, su): (Vec<f64>, Vec<f64>) = if k < N {
+            let (l, u) = solver.slacks(k).unwrap();
+            (l.iter().copied().collect(), u.iter().copied().collect())
+        } else {
+            let (l, u) = solver.terminal_slacks();
+            (l.iter().copied().collect(), u.iter().copied().collect())
+        };
+        for (ours, theirs) in [(&sl, &reference.sl[k]), (&su, &reference.su[k])] {
+            assert_eq!(ours.len(), theirs.len());
+            for (a, b) in ours.iter().zip(theirs) {
+                worst = worst.max((a - b).abs());
+            }
+        }
+    }
+    worst / scale
+}
+
+macro_rules! soft_against_clarabel {
+    ($name:ident, $nx:literal, $nu:literal, $ng:literal, $ngn:literal, $n:literal) => {
+        proptest! {
+            #![proptest_config(ProptestConfig { cases: 12, ..ProptestConfig::default() })]
+            #[test]
+            fn $name(seed in any::<u64>()) {
+                let qp = random_soft_qp::<$nx, $nu, $ng, $ngn, $n>(seed);
+                let reference = clarabel_solve(&qp);
+                prop_assume!(reference.is_some(), "clarabel found no reference solution");
+                let reference = reference.unwrap();
+                // The same screening as the hard test; the slacks' own bounds `s >= 0` count
+                // (an L1-penalized row whose multiplier equals its penalty is degenerate).
+                prop_assume!(reference.strict_complementarity > 1e-3, "nearly degenerate solution");
+                let mut solver = Box::new(QpSolver::<f64, $nx, $nu, $ng, $ngn, $n>::NEW);
+                solver.settings.tol_stat = 1e-10;
+                solver.settings.tol_comp = 1e-12;
+                let info = solver.solve(&qp);
+                prop_assert_eq!(info.status, QpStatus::Solved, "{:?}", info);
+                let st = solver.settings;
+                prop_assert!(info.res_stat <= st.tol_stat && info.res_eq <= st.tol_eq
+                    && info.res_ineq <= st.tol_ineq && info.mu <= st.tol_comp, "{:?}", info);
+                let sol = solver.solution();
+                let xs: Vec<_> = (0..=$n).map(|k| *sol.state(k).unwrap()).collect();
+                let err = compare(&reference, &sol.u, &xs);
+                prop_assert!(err <= 1e-7, "f64 differs from clarabel by {err:e} (relative)");
+                let err = compare_slacks(&reference, &solver);
+                prop_assert!(err <= 1e-7, "slacks differ from clarabel by {err:e} (relative)");
+            }
+        }
+    };
+}
+
+soft_against_clarabel!(soft_small_n5, 2, 1, 1, 0, 5);
+soft_against_clarabel!(soft_medium_n10, 4, 2, 2, 1, 10);
+soft_against_clarabel!(soft_large_n30, 12, 5, 3, 2, 30);
+
+/// The soft random QPs exercise what they are meant to: in most draws some slack is clearly
+/// active (so the comparison above is not one of zeros), and the same QPs with the soft rows
+/// hard are mostly infeasible.
+#[test]
+fn soft_random_qps_have_active_slacks() {
+    let (mut active, mut judged, mut hard_fails) = (0, 0, 0);
+    for seed in 0..20u64 {
+        let qp = random_soft_qp::<4, 2, 2, 1, 10>(seed);
+        let Some(reference) = clarabel_solve(&qp) else {
+            continue;
+        };
+        judged += 1;
+        let max_slack = reference
+            .sl
+            .iter()
+            .chain(&reference.su)
+            .flatten()
+            .fold(0.0f64, |m, v| m.max(*v));
+        if max_slack > 1e-2 {
+            active += 1;
+        }
+        let mut solver = Box::new(QpSolver::<f64, 4, 2, 2, 1, 10>::NEW);
+        assert_eq!(solver.solve(&qp).status, QpStatus::Solved, "seed {seed}");
+        let mut hard = qp;
+        for s in hard.stages.iter_mut() {
+            s.soft_l1 = SVector::zeros();
+            s.soft_l2 = SVector::zeros();
+        }
+        hard.terminal.soft_l1 = SVector::zeros();
+        hard.terminal.soft_l2 = SVector::zeros();
+        if solver.solve(&hard).status != QpStatus::Solved {
+            hard_fails += 1;
+        }
+    }
+    assert!(judged >= 18, "clarabel solved only {judged} of 20");
+    assert!(
+        active >= judged * 3 / 4,
+        "slacks active in {active} of {judged}"
+    );
+    assert!(hard_fails >= 5, "only {hard_fails} of 20 fail when hard");
+}
+
+/// One stage, one control: `min 1/2 r u^2 + g u` (unconstrained minimizer `-g/r = 3`) with a
+/// soft upper bound `u <= ug + su`, `ug = 1`, solved in precision `T`.
+fn scalar_soft<T: mpc_runtime::Real>(l1: f64, l2: f64) -> (f64, f64, mpc_runtime::QpInfo<T>) {
+    let mut qp = OcpQp::<T, 1, 1, 1, 0, 1>::NEW;
+    let s = &mut qp.stages[0];
+    s.r[(0, 0)] = T::lit(2.0);
+    s.gu[0] = T::lit(-6.0);
+    s.b[(0, 0)] = T::ONE;
+    s.d[(0, 0)] = T::ONE;
+    s.ug[0] = T::ONE;
+    s.soft_l1[0] = T::lit(l1);
+    s.soft_l2[0] = T::lit(l2);
+    qp.terminal.q[(0, 0)] = T::ZERO;
+    let mut solver = QpSolver::<T, 1, 1, 1, 0, 1>::NEW;
+    let info = solver.solve(&qp);
+    let (sl, su) = solver.slacks(0).unwrap();
+    assert_eq!(sl[0], T::ZERO, "the absent lower side has no slack");
+    (solver.solution().u[0][0].to_f64(), su[0].to_f64(), info)
+}
+
+/// L2 only: `min 1/2 r u^2 + g u + 1/2 l2 (u - ug)_+^2` has `u = (l2 ug - g) / (r + l2)`.
+#[test]
+fn soft_l2_matches_the_closed_form_minimizer() {
+    for l2 in [0.5, 4.0, 100.0] {
+        let want = (l2 * 1.0 + 6.0) / (2.0 + l2);
+        let (u, su, info) = scalar_soft::<f64>(0.0, l2);
+        assert_eq!(info.status, QpStatus::Solved, "{info:?}");
+        assert!((u - want).abs() <= 1e-9, "l2 {l2}: u {u} vs {want}");
+        assert!((su - (want - 1.0)).abs() <= 1e-9, "l2 {l2}: slack {su}");
+        let (u, su, info) = scalar_soft::<f32>(0.0, l2);
+        assert_eq!(info.status, QpStatus::Solved, "f32 {info:?}");
+        assert!((u - want).abs() <= 1e-3, "f32 l2 {l2}: u {u} vs {want}");
+        assert!((su - (want - 1.0)).abs() <= 1e-3, "f32 l2 {l2}: slack {su}");
+    }
+}
+
+/// L2 only with the constraint inactive (`g = +6`, minimizer `-3 < ug`): the slack is zero.
+#[test]
+fn soft_l2_inactive_has_zero_slack() {
+    let mut qp = OcpQp::<f64, 1, 1, 1, 0, 1>::NEW;
+    let s = &mut qp.stages[0];
+    s.r[(0, 0)] = 2.0;
+    s.gu[0] = 6.0;
+    s.d[(0, 0)] = 1.0;
+    s.ug[0] = 1.0;
+    s.lg[0] = -5.0;
+    s.soft_l2[0] = 3.0;
+    let mut solver = QpSolver::<f64, 1, 1, 1, 0, 1>::NEW;
+    let info = solver.solve(&qp);
+    assert_eq!(info.status, QpStatus::Solved, "{info:?}");
+    assert!((solver.solution().u[0][0] + 3.0).abs() <= 1e-9);
+    let (sl, su) = solver.slacks(0).unwrap();
+    assert!(sl[0].abs() <= 1e-9 && su[0].abs() <= 1e-9, "{sl} {su}");
+}
+
+/// L1 only: the hard constraint's multiplier is `-(r ug + g) = 4`. A larger penalty keeps the
+/// constraint exactly (zero slack); a smaller one lets it go to `u = -(g + l1) / r`.
+#[test]
+fn soft_l1_is_an_exact_penalty() {
+    for l1 in [4.5, 6.0, 50.0] {
+        let (u, su, info) = scalar_soft::<f64>(l1, 0.0);
+        assert_eq!(info.status, QpStatus::Solved, "{info:?}");
+        assert!(su.abs() <= 1e-9, "l1 {l1}: slack {su} should be zero");
+        assert!((u - 1.0).abs() <= 1e-9, "l1 {l1}: u {u}");
+    }
+    for l1 in [0.5, 1.0, 3.5] {
+        let want = (6.0 - l1) / 2.0;
+        let (u, su, info) = scalar_soft::<f64>(l1, 0.0);
+        assert_eq!(info.status, QpStatus::Solved, "{info:?}");
+        assert!((u - want).abs() <= 1e-9, "l1 {l1}: u {u} vs {want}");
+        assert!((su - (want - 1.0)).abs() <= 1e-9, "l1 {l1}: slack {su}");
+        let (u, su, info) = scalar_soft::<f32>(l1, 0.0);
+        assert_eq!(info.status, QpStatus::Solved, "f32 {info:?}");
+        assert!((u - want).abs() <= 1e-3, "f32 l1 {l1}: u {u} vs {want}");
+        assert!((su - (want - 1.0)).abs() <= 1e-3, "f32 l1 {l1}: slack {su}");
+    }
+}
+
+/// `x_1 = x_0 + u_0` with `u_0 in [0, 1]` from `x_0 = 0` and the general constraint
+/// `x_1 >= 5`: infeasible when hard; soft, the slack takes the rest (`x_1 = 1`, slack 4).
+#[test]
+fn contradictory_soft_constraints_are_absorbed_by_slacks() {
+    let build = |l1: f64, l2: f64| {
+        let mut qp = OcpQp::<f64, 1, 1, 1, 1, 3>::NEW;
+        for s in qp.stages.iter_mut() {
+            s.a[(0, 0)] = 1.0;
+            s.b[(0, 0)] = 1.0;
+            s.q[(0, 0)] = 1.0;
+            s.r[(0, 0)] = 1.0;
+            s.lbu[0] = 0.0;
+            s.ubu[0] = 1.0;
+        }
+        let s = &mut qp.stages[1];
+        s.c[(0, 0)] = 1.0;
+        s.lg[0] = 5.0;
+        s.soft_l1[0] = l1;
+        s.soft_l2[0] = l2;
+        // And a terminal row x_3 <= -10, out of reach from x_3 >= 0.
+        let t = &mut qp.terminal;
+        t.c[(0, 0)] = 1.0;
+        t.ug[0] = -10.0;
+        t.soft_l1[0] = l1;
+        t.soft_l2[0] = l2;
+        qp
+    };
+    let mut solver = QpSolver::<f64, 1, 1, 1, 1, 3>::NEW;
+    solver.settings.max_iter = 200;
+    let info = solver.solve(&build(0.0, 0.0));
+    assert_eq!(info.status, QpStatus::Infeasible, "hard: {info:?}");
+    assert!(info.iterations < 200);
+    for (l1, l2) in [(10.0, 1.0), (10.0, 0.0), (0.0, 10.0)] {
+        let info = solver.solve(&build(l1, l2));
+        assert_eq!(info.status, QpStatus::Solved, "soft {l1} {l2}: {info:?}");
+        let sol = solver.solution();
+        let x1 = sol.x[1][0];
+        let (sl, su) = solver.slacks(1).unwrap();
+        assert!(sl[0] >= 3.9, "lower slack {}", sl[0]);
+        assert!(
+            (sl[0] - (5.0 - x1)).abs() <= 1e-8,
+            "slack {} x1 {x1}",
+            sl[0]
+        );
+        assert_eq!(su[0], 0.0, "absent upper side");
+        let (tl, tu) = solver.terminal_slacks();
+        assert!(tu[0] >= 10.0 - 1e-8, "terminal slack {}", tu[0]);
+        assert!((tu[0] - (sol.xn[0] + 10.0)).abs() <= 1e-8);
+        assert_eq!(tl[0], 0.0);
+        // The stages without constraint rows have zero slacks.
+        assert_eq!(
+            solver.slacks(0).unwrap(),
+            (SVector::zeros(), SVector::zeros())
+        );
+        assert!(solver.slacks(3).is_none());
+    }
+}
+
+#[test]
+fn negative_or_non_finite_penalties_are_rejected() {
+    let mut solver = QpSolver::<f64, 4, 2, 1, 0, 8>::NEW;
+    for bad in [-1.0, f64::NAN, f64::INFINITY] {
+        let mut qp = random_soft_qp::<4, 2, 1, 0, 8>(5);
+        qp.stages[2].soft_l1[0] = bad;
+        assert_eq!(solver.solve(&qp).status, QpStatus::NonFiniteInput);
+        let mut qp = random_soft_qp::<4, 2, 1, 0, 8>(5);
+        qp.stages[2].soft_l2[0] = bad;
+        assert_eq!(solver.solve(&qp).status, QpStatus::NonFiniteInput);
+    }
+    let qp = random_soft_qp::<4, 2, 1, 0, 8>(5);
+    assert_eq!(solver.solve(&qp).status, QpStatus::Solved);
+}
 
 /// Unconstrained LQ: with the terminal weight equal to the solution of the discrete algebraic
 /// Riccati equation, the first control is the infinite-horizon LQR feedback.

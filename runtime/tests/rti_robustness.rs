@@ -1,5 +1,6 @@
 //! Failure handling of the RTI solver: non-finite inputs leave no trace, a failing QP returns
-//! the previous plan shifted, and no step allocates.
+//! the previous plan shifted, soft constraints keep an infeasible start solvable, and no step
+//! allocates.
 
 mod support;
 
@@ -211,6 +212,174 @@ fn failing_qp_returns_the_previous_plan_shifted() {
     }
 }
 
+/// `di()` with the soft constraint `p + v >= 0.5` (L1 penalty 50, L2 penalty 10).
+fn di_soft() -> Box<Di> {
+    let mut s = di();
+    s.set_constraint_bounds(
+        &SVector::from([0.5]),
+        &SVector::from([f64::INFINITY]),
+        &SVector::zeros(),
+        &SVector::zeros(),
+    )
+    .unwrap();
+    s.set_soft_penalties(
+        &SVector::from([50.0]),
+        &SVector::from([10.0]),
+        &SVector::zeros(),
+        &SVector::zeros(),
+    )
+    .unwrap();
+    s
+}
+
+#[test]
+fn bad_soft_penalties_are_rejected_and_leave_no_trace() {
+    let mut clean = di_soft();
+    let mut dirty = di_soft();
+    let mut x = SVector::from([-1.0, 0.0]);
+    let mut xd = x;
+    let (z, z0) = (SVector::<f64, 1>::zeros(), SVector::<f64, 0>::zeros());
+    for k in 0..20 {
+        if k == 7 {
+            let bad = [
+                (SVector::from([-1.0]), z, Err(SetError::NegativePenalty)),
+                (z, SVector::from([-1e-12]), Err(SetError::NegativePenalty)),
+                (SVector::from([f64::NAN]), z, Err(SetError::NonFinite)),
+                (z, SVector::from([f64::INFINITY]), Err(SetError::NonFinite)),
+                // NaN is reported before a negative value elsewhere.
+                (
+                    SVector::from([-1.0]),
+                    SVector::from([f64::NAN]),
+                    Err(SetError::NonFinite),
+                ),
+            ];
+            for (l1, l2, want) in bad {
+                assert_eq!(dirty.set_soft_penalties(&l1, &l2, &z0, &z0), want);
+            }
+        }
+        x = step(&mut clean, &x);
+        xd = step(&mut dirty, &xd);
+        assert_eq!(
+            x, xd,
+            "step {k}: the refused penalties changed the closed loop"
+        );
+    }
+}
+
+/// The initial state violates `p + v >= 0.5` at stage 0, where no control can help: with the
+/// row soft every QP is solved and the closed loop settles on the constraint (`p = 0.5`: the
+/// L1 penalty exceeds the multiplier, so the penalty is exact); with the row hard the first
+/// QP is infeasible and the solver falls back on its plan.
+#[test]
+fn soft_constraint_violated_at_start_keeps_the_loop_running() {
+    let mut s = di_soft();
+    let mut x = SVector::from([-1.0, 0.0]);
+    for k in 0..80 {
+        s.prepare();
+        let (u, info) = s.feedback(&x);
+        assert_eq!(info.status, RtiStatus::Ok, "step {k}: {info:?}");
+        let mut a = SMatrix::zeros();
+        let mut b = SMatrix::zeros();
+        x = <DoubleIntegrator as Model<f64, 2, 1, 0, 3, 2, 1, 0>>::dynamics(
+            &s.model,
+            &x,
+            &u,
+            &SVector::zeros(),
+            &mut a,
+            &mut b,
+        );
+    }
+    assert!(
+        (x[0] - 0.5).abs() <= 1e-3 && x[1].abs() <= 1e-3,
+        "final state {x}"
+    );
+
+    let mut hard = di_soft();
+    hard.set_soft_penalties(
+        &SVector::zeros(),
+        &SVector::zeros(),
+        &SVector::zeros(),
+        &SVector::zeros(),
+    )
+    .unwrap();
+    hard.prepare();
+    let (_, info) = hard.feedback(&SVector::from([-1.0, 0.0]));
+    assert_eq!(info.status, RtiStatus::UsedPreviousPlan, "{info:?}");
+    assert_eq!(info.qp.status, mpc_runtime::QpStatus::Infeasible);
+}
+
+/// The same in `f32`: every QP is solved and the loop settles on the soft constraint.
+#[test]
+fn soft_constraint_violated_at_start_in_f32() {
+    let mut s = Box::new(Rti::<f32, DoubleIntegrator, 2, 1, 0, 3, 2, 1, 0, 15>::new(
+        DoubleIntegrator { dt: 0.1 },
+    ));
+    let w = SMatrix::<f32, 3, 3>::from_diagonal(&SVector::from([10.0, 1.0, 0.1]));
+    s.set_weights(&w, &(SMatrix::identity() * 10.0)).unwrap();
+    let inf = SVector::repeat(f32::INFINITY);
+    s.set_bounds(&-inf, &inf, &SVector::from([-1.0]), &SVector::from([1.0]))
+        .unwrap();
+    s.set_constraint_bounds(
+        &SVector::from([0.5]),
+        &SVector::from([f32::INFINITY]),
+        &SVector::zeros(),
+        &SVector::zeros(),
+    )
+    .unwrap();
+    s.set_soft_penalties(
+        &SVector::from([50.0]),
+        &SVector::from([10.0]),
+        &SVector::zeros(),
+        &SVector::zeros(),
+    )
+    .unwrap();
+    s.settings.shift = true;
+    let mut x = SVector::<f32, 2>::from([-1.0, 0.0]);
+    for k in 0..80 {
+        s.prepare();
+        let (u, info) = s.feedback(&x);
+        assert_eq!(info.status, RtiStatus::Ok, "step {k}: {info:?}");
+        let mut a = SMatrix::zeros();
+        let mut b = SMatrix::zeros();
+        x = <DoubleIntegrator as Model<f32, 2, 1, 0, 3, 2, 1, 0>>::dynamics(
+            &s.model,
+            &x,
+            &u,
+            &SVector::zeros(),
+            &mut a,
+            &mut b,
+        );
+    }
+    assert!(
+        (x[0] - 0.5).abs() <= 1e-2 && x[1].abs() <= 1e-2,
+        "final state {x}"
+    );
+}
+
+/// The full SQP's merit function carries the soft rows' penalties. From rest at the origin
+/// the zero trajectory is dynamically feasible and has zero cost, but violates the soft row
+/// `p + v >= 0.5` everywhere: the QP step trades tracking cost for less violation, which a
+/// merit of cost and dynamics defects alone would refuse at every step length (the SQP would
+/// crawl to its iteration limit). With the penalties, this linear model converges at once.
+#[test]
+fn full_sqp_merit_includes_the_soft_penalties() {
+    let mut s = di_soft();
+    let x0 = SVector::from([0.0, 0.0]);
+    let info = s.solve_sqp(&x0);
+    assert_eq!(info.status, RtiStatus::Ok, "{info:?}");
+    assert!(info.sqp_iterations <= 4, "{info:?}");
+    // The RTI from the same start reaches the same first control once converged.
+    let mut r = di_soft();
+    r.settings.shift = false;
+    let mut u = SVector::zeros();
+    for _ in 0..10 {
+        r.prepare();
+        u = r.feedback(&x0).0;
+    }
+    let d = (u - s.control(0).unwrap()).amax();
+    assert!(d <= 1e-6, "SQP u0 {} vs RTI {u}", s.control(0).unwrap());
+}
+
 #[test]
 fn prepare_feedback_and_sqp_do_not_allocate() {
     let mut s = di();
@@ -226,6 +395,20 @@ fn prepare_feedback_and_sqp_do_not_allocate() {
         s.solve_sqp(&x)
     });
     assert_eq!(n, 0, "allocations during prepare/feedback/solve_sqp");
+    // With a soft row violated at the start (slacks active, merit with penalties).
+    let mut s = di_soft();
+    let x = SVector::from([-1.0, 0.0]);
+    s.prepare();
+    let _ = s.feedback(&x);
+    let (info, n) = count_allocations(|| {
+        for _ in 0..10 {
+            s.prepare();
+            let _ = s.feedback(&x);
+        }
+        s.solve_sqp(&x)
+    });
+    assert_eq!(info.status, RtiStatus::Ok, "{info:?}");
+    assert_eq!(n, 0, "allocations with soft constraints");
     // The counter works: a Vec allocates.
     let (_, n) = count_allocations(|| vec![1u8; 16]);
     assert_eq!(n, 1);

@@ -151,7 +151,68 @@ pub fn random_qp_with_witness<
     (qp, witness)
 }
 
-/// The QP in clarabel's form over `z = (u_0, x_1, u_1, ..., x_{N-1}, u_{N-1}, x_N)`.
+/// [`random_qp`] with soft general constraints: each general row (stage and terminal) is soft
+/// with probability 0.6, with an L1 penalty only, an L2 penalty only, or both (each in
+/// [0.1, 3]); a soft row's bounds are moved off the witness trajectory and narrowed (to a band
+/// of width at most 0.4 around a point up to 1 away), so its slacks are often active, and
+/// with soft rows the QP stays feasible whatever the bounds.
+pub fn random_soft_qp<
+    const NX: usize,
+    const NU: usize,
+    const NG: usize,
+    const NGN: usize,
+    const N: usize,
+>(
+    seed: u64,
+) -> OcpQp<f64, NX, NU, NG, NGN, N> {
+    let mut qp = random_qp::<NX, NU, NG, NGN, N>(seed);
+    let mut rng = Rng::new(seed ^ 0x9E37_79B9_7F4A_7C15);
+    let mut soften = |lg: &mut f64, ug: &mut f64, l1: &mut f64, l2: &mut f64| {
+        if !rng.chance(0.6) {
+            return;
+        }
+        let kind = rng.next();
+        *l1 = if kind < 2.0 / 3.0 {
+            rng.uniform(0.1, 3.0)
+        } else {
+            0.0
+        };
+        *l2 = if kind >= 1.0 / 3.0 {
+            rng.uniform(0.1, 3.0)
+        } else {
+            0.0
+        };
+        let c = 0.5 * (*lg + *ug) + rng.uniform(-1.0, 1.0);
+        let hw = rng.uniform(0.0, 0.2);
+        *lg = c - hw;
+        *ug = c + hw;
+    };
+    for s in qp.stages.iter_mut() {
+        for i in 0..NG {
+            soften(
+                &mut s.lg[i],
+                &mut s.ug[i],
+                &mut s.soft_l1[i],
+                &mut s.soft_l2[i],
+            );
+        }
+    }
+    let t = &mut qp.terminal;
+    for i in 0..NGN {
+        soften(
+            &mut t.lg[i],
+            &mut t.ug[i],
+            &mut t.soft_l1[i],
+            &mut t.soft_l2[i],
+        );
+    }
+    qp
+}
+
+/// The QP in clarabel's form over `z = (u_0, x_1, u_1, ..., x_{N-1}, u_{N-1}, x_N, s)`, where
+/// `s` are the slacks of the soft general-constraint sides (lower before upper, stage by
+/// stage, then the terminal rows), written out as variables of their own with cost
+/// `l1 s + 1/2 l2 s^2`, `s >= 0` (where `l1 > 0`, see below), relaxing their side.
 pub struct Dense {
     pub p: Vec<Vec<f64>>,
     pub q: Vec<f64>,
@@ -159,6 +220,9 @@ pub struct Dense {
     pub b: Vec<f64>,
     pub n_eq: usize,
     pub n_ineq: usize,
+    /// Index in `z` of the (lower, upper) slack of each general row, per stage and then the
+    /// terminal stage (index N); `None` for hard rows and absent sides.
+    pub slack_index: Vec<Vec<(Option<usize>, Option<usize>)>>,
 }
 
 pub fn dense<
@@ -179,12 +243,88 @@ pub fn dense<
         }
     };
     let xo = |k: usize| NU + (k - 1) * (NX + NU);
-    let nz = NU + (N - 1) * (NX + NU) + NX;
+    let nprimal = NU + (N - 1) * (NX + NU) + NX;
+    let big = 1e19;
+    // Slack variables after the primal ones.
+    let mut nz = nprimal;
+    let mut slack_index = Vec::new();
+    let mut slack_cost = Vec::new();
+    let rows = qp
+        .stages
+        .iter()
+        .map(|s| {
+            (
+                s.lg.as_slice(),
+                s.ug.as_slice(),
+                s.soft_l1.as_slice(),
+                s.soft_l2.as_slice(),
+            )
+        })
+        .chain(std::iter::once((
+            qp.terminal.lg.as_slice(),
+            qp.terminal.ug.as_slice(),
+            qp.terminal.soft_l1.as_slice(),
+            qp.terminal.soft_l2.as_slice(),
+        )));
+    for (lg, ug, l1, l2) in rows {
+        let mut idx = Vec::new();
+        for i in 0..lg.len() {
+            let soft = l1[i] > 0.0 || l2[i] > 0.0;
+            let mut side = |present: bool| {
+                if soft && present {
+                    slack_cost.push((l1[i], l2[i]));
+                    nz += 1;
+                    Some(nz - 1)
+                } else {
+                    None
+                }
+            };
+            let lo = side(lg[i] > -big);
+            let hi = side(ug[i] < big);
+            idx.push((lo, hi));
+        }
+        slack_index.push(idx);
+    }
     let mut p = vec![vec![0.0; nz]; nz];
     let mut q = vec![0.0; nz];
     let mut eq: Vec<(Vec<f64>, f64)> = Vec::new();
     let mut ineq: Vec<(Vec<f64>, f64)> = Vec::new();
-    let big = 1e19;
+    for (j, (l1, l2)) in slack_cost.iter().enumerate() {
+        let z = nprimal + j;
+        q[z] += l1;
+        p[z][z] += l2;
+        // `s >= 0`. Without a linear penalty it is redundant (a negative slack tightens its
+        // row and costs more) and left out: kept, it is weakly active (slack and multiplier
+        // both zero) wherever the side is satisfied, and an interior-point solver, clarabel
+        // included, pins such a slack only to about sqrt(mu).
+        if *l1 > 0.0 {
+            let mut row = vec![0.0; nz];
+            row[z] = -1.0;
+            ineq.push((row, 0.0));
+        }
+    }
+    // A general row with optional slacks: lo - s_l <= row z + offset <= hi + s_u.
+    let general = |row: Vec<f64>,
+                   offset: f64,
+                   lo: f64,
+                   hi: f64,
+                   slacks: (Option<usize>, Option<usize>),
+                   ineq: &mut Vec<(Vec<f64>, f64)>| {
+        if hi < big {
+            let mut r = row.clone();
+            if let Some(j) = slacks.1 {
+                r[j] = -1.0;
+            }
+            ineq.push((r, hi - offset));
+        }
+        if lo > -big {
+            let mut r: Vec<f64> = row.iter().map(|v| -v).collect();
+            if let Some(j) = slacks.0 {
+                r[j] = -1.0;
+            }
+            ineq.push((r, offset - lo));
+        }
+    };
     let two_sided =
         |row: Vec<f64>, offset: f64, lo: f64, hi: f64, ineq: &mut Vec<(Vec<f64>, f64)>| {
             // lo <= row z + offset <= hi
@@ -253,7 +393,7 @@ pub fn dense<
                 two_sided(row, 0.0, s.lbx[i], s.ubx[i], &mut ineq);
             }
         }
-        for g in 0..NG {
+        for (g, &slacks) in slack_index[k].iter().enumerate() {
             let mut row = vec![0.0; nz];
             let mut offset = 0.0;
             for j in 0..NU {
@@ -266,7 +406,7 @@ pub fn dense<
                     row[xo(k) + j] = s.c[(g, j)];
                 }
             }
-            two_sided(row, offset, s.lg[g], s.ug[g], &mut ineq);
+            general(row, offset, s.lg[g], s.ug[g], slacks, &mut ineq);
         }
     }
     let t = &qp.terminal;
@@ -279,12 +419,12 @@ pub fn dense<
         row[xo(N) + i] = 1.0;
         two_sided(row, 0.0, t.lbx[i], t.ubx[i], &mut ineq);
     }
-    for g in 0..NGN {
+    for (g, &slacks) in slack_index[N].iter().enumerate() {
         let mut row = vec![0.0; nz];
         for j in 0..NX {
             row[xo(N) + j] = t.c[(g, j)];
         }
-        two_sided(row, 0.0, t.lg[g], t.ug[g], &mut ineq);
+        general(row, 0.0, t.lg[g], t.ug[g], slacks, &mut ineq);
     }
     let n_eq = eq.len();
     let n_ineq = ineq.len();
@@ -296,6 +436,7 @@ pub fn dense<
         b,
         n_eq,
         n_ineq,
+        slack_index,
     }
 }
 
@@ -305,6 +446,10 @@ pub fn dense<
 pub struct Reference<const NX: usize, const NU: usize> {
     pub u: Vec<SVector<f64, NU>>,
     pub x: Vec<SVector<f64, NX>>,
+    /// Lower and upper slacks of the general rows per stage, then the terminal stage (index
+    /// N); zero for hard rows.
+    pub sl: Vec<Vec<f64>>,
+    pub su: Vec<Vec<f64>>,
     pub strict_complementarity: f64,
 }
 
@@ -360,6 +505,17 @@ pub fn clarabel_solve<
             }
         })
         .collect();
+    let slack = |j: Option<usize>| j.map_or(0.0, |j| z[j]);
+    let sl = d
+        .slack_index
+        .iter()
+        .map(|v| v.iter().map(|&(l, _)| slack(l)).collect())
+        .collect();
+    let su = d
+        .slack_index
+        .iter()
+        .map(|v| v.iter().map(|&(_, h)| slack(h)).collect())
+        .collect();
     let sol = &solver.solution;
     let strict_complementarity = sol.s[d.n_eq..]
         .iter()
@@ -369,6 +525,8 @@ pub fn clarabel_solve<
     Some(Reference {
         u: us,
         x: xs,
+        sl,
+        su,
         strict_complementarity,
     })
 }
