@@ -95,8 +95,12 @@ fn main() -> ExitCode {
 fn default_runtime_path(out: &std::path::Path) -> Option<String> {
     let runtime = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("runtime");
     let runtime = runtime.canonicalize().ok()?;
-    std::fs::create_dir_all(out).ok()?;
-    let out = out.canonicalize().ok()?;
+    // `out` may not exist yet; it is created only once generation succeeded.
+    let out = std::path::absolute(out).ok()?;
+    let out = match out.canonicalize() {
+        Ok(c) => c,
+        Err(_) => out,
+    };
     let rel = mpc_codegen::relative_path(&out, &runtime)?;
     Some(rel.replace('\\', "/"))
 }

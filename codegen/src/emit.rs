@@ -59,7 +59,7 @@ fn lits(v: &[f64], s: Scalar) -> TokenStream {
     quote!([#(#items),*])
 }
 
-fn operand(o: Operand, f: &Function, s: Scalar) -> TokenStream {
+fn operand(o: Operand, f: &Function, s: Scalar, slots: &[usize]) -> TokenStream {
     match o {
         Operand::Input(k) => {
             let (arg, i) = f.inputs[k as usize];
@@ -73,7 +73,7 @@ fn operand(o: Operand, f: &Function, s: Scalar) -> TokenStream {
         }
         Operand::Const(c) => lit(c, s),
         Operand::Temp(t) => {
-            let id = format_ident!("t{}", t);
+            let id = format_ident!("t{}", slots[t as usize]);
             quote!(#id)
         }
     }
@@ -96,12 +96,72 @@ fn body(
     ret: Option<TokenStream>,
     uses: &mut Uses,
 ) -> TokenStream {
-    let mut stmts = Vec::with_capacity(f.program.instrs().len());
-    for (i, ins) in f.program.instrs().iter().enumerate() {
-        let t = format_ident!("t{}", i);
+    // Register allocation: a temporary's variable is reused once its last reader has run,
+    // so a function declares about as many variables as values are live at once (not one
+    // per instruction: thousands of nested `let` scopes make LLVM's debug-info pass recurse
+    // too deep). Outputs are written as soon as they are computed.
+    let instrs = f.program.instrs();
+    let n = instrs.len();
+    let mut last_use = vec![0usize; n];
+    for (i, ins) in instrs.iter().enumerate() {
+        last_use[i] = i;
+        for o in ins.operands() {
+            if let Operand::Temp(t) = o {
+                last_use[t as usize] = i;
+            }
+        }
+    }
+    let mut writes_at: Vec<Vec<(Operand, Target)>> = vec![Vec::new(); n];
+    let mut late = Vec::new();
+    for (o, t) in f.program.outputs().iter().zip(&f.outputs) {
+        match *o {
+            Operand::Const(c) if c == 0.0 => {} // zeros are already there
+            Operand::Temp(k) => writes_at[k as usize].push((*o, *t)),
+            _ => late.push((*o, *t)),
+        }
+    }
+    let mut slots = vec![0usize; n];
+    let mut free: Vec<usize> = Vec::new();
+    let mut nslots = 0usize;
+    for (i, ins) in instrs.iter().enumerate() {
+        let mut seen = [u32::MAX; 2];
+        for (k, o) in ins.operands().enumerate() {
+            if let Operand::Temp(t) = o {
+                if last_use[t as usize] == i && !seen.contains(&t) {
+                    free.push(slots[t as usize]);
+                }
+                seen[k] = t;
+            }
+        }
+        slots[i] = free.pop().unwrap_or_else(|| {
+            nslots += 1;
+            nslots - 1
+        });
+        if last_use[i] == i {
+            // Read by no later instruction (an output only): free after its writes.
+            free.push(slots[i]);
+        }
+    }
+    let write = |o: Operand, t: Target| {
+        let v = operand(o, f, s, &slots);
+        match t {
+            Target::Ret(i) => {
+                let i = ul(i);
+                quote!(r[#i] = #v;)
+            }
+            Target::Mat(m, i, j) => {
+                let m = format_ident!("{}", m);
+                let (i, j) = (ul(i), ul(j));
+                quote!(#m[(#i, #j)] = #v;)
+            }
+        }
+    };
+    let mut stmts = Vec::with_capacity(n);
+    for (i, ins) in instrs.iter().enumerate() {
+        let t = format_ident!("t{}", slots[i]);
         let e = match *ins {
             Instr::Unary(op, a) => {
-                let a = operand(a, f, s);
+                let a = operand(a, f, s, &slots);
                 match op {
                     UnaryOp::Neg => quote!(-#a),
                     UnaryOp::Sign => {
@@ -124,12 +184,12 @@ fn body(
             }
             Instr::PowI(a, n) => {
                 uses.powi = true;
-                let a = operand(a, f, s);
+                let a = operand(a, f, s, &slots);
                 let n = proc_macro2::Literal::i32_unsuffixed(n);
                 quote!(powi(#a, #n))
             }
             Instr::Binary(op, a, b) => {
-                let (a, b) = (operand(a, f, s), operand(b, f, s));
+                let (a, b) = (operand(a, f, s, &slots), operand(b, f, s, &slots));
                 match op {
                     BinaryOp::Add => quote!(#a + #b),
                     BinaryOp::Sub => quote!(#a - #b),
@@ -154,42 +214,34 @@ fn body(
                 }
             }
         };
-        stmts.push(quote!(let #t: Real = #e;));
+        stmts.push(quote!(#t = #e;));
+        for &(o, tg) in &writes_at[i] {
+            stmts.push(write(o, tg));
+        }
     }
+    let late: Vec<_> = late.into_iter().map(|(o, t)| write(o, t)).collect();
+    let decls = (0..nslots).map(|k| {
+        let t = format_ident!("t{}", k);
+        quote!(let mut #t: Real;)
+    });
     let fills = mats.iter().map(|m| {
         let m = format_ident!("{}", m);
         quote!(#m.fill(0.0);)
     });
-    let mut writes = Vec::new();
-    for (o, t) in f.program.outputs().iter().zip(&f.outputs) {
-        if *o == Operand::Const(0.0) {
-            continue; // zeros are already there
-        }
-        let v = operand(*o, f, s);
-        match *t {
-            Target::Ret(i) => {
-                let i = ul(i);
-                writes.push(quote!(r[#i] = #v;));
-            }
-            Target::Mat(m, i, j) => {
-                let m = format_ident!("{}", m);
-                let (i, j) = (ul(i), ul(j));
-                writes.push(quote!(#m[(#i, #j)] = #v;));
-            }
-        }
-    }
     match ret {
         Some(ty) => quote! {
-            #(#stmts)*
             #(#fills)*
             let mut r = <#ty>::zeros();
-            #(#writes)*
+            #(#decls)*
+            #(#stmts)*
+            #(#late)*
             r
         },
         None => quote! {
-            #(#stmts)*
             #(#fills)*
-            #(#writes)*
+            #(#decls)*
+            #(#stmts)*
+            #(#late)*
         },
     }
 }
@@ -301,7 +353,7 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
             ));
             quote! {
                 #d
-                #[allow(unused_variables)]
+                #[allow(unused_variables, unused_mut, unused_assignments)]
                 pub fn constraints(
                     x: &SVector<Real, NX>,
                     u: &SVector<Real, NU>,
@@ -324,7 +376,7 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
             ));
             quote! {
                 #d
-                #[allow(unused_variables)]
+                #[allow(unused_variables, unused_mut, unused_assignments)]
                 pub fn terminal_constraints(
                     x: &SVector<Real, NX>,
                     p: &SVector<Real, NP>,
@@ -736,7 +788,7 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
             #helpers_mod
 
             #dyn_doc
-            #[allow(unused_variables)]
+            #[allow(unused_variables, unused_mut, unused_assignments)]
             pub fn dynamics(
                 x: &SVector<Real, NX>,
                 u: &SVector<Real, NU>,
@@ -748,7 +800,7 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
             }
 
             #res_doc
-            #[allow(unused_variables)]
+            #[allow(unused_variables, unused_mut, unused_assignments)]
             pub fn residual(
                 x: &SVector<Real, NX>,
                 u: &SVector<Real, NU>,
@@ -760,7 +812,7 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
             }
 
             #resn_doc
-            #[allow(unused_variables)]
+            #[allow(unused_variables, unused_mut, unused_assignments)]
             pub fn terminal_residual(
                 x: &SVector<Real, NX>,
                 p: &SVector<Real, NP>,
@@ -771,7 +823,7 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
 
             /// The weights `W` (stage, block-diagonal in the residual's blocks) and `W_N`
             /// (terminal) from the parameters (only global ones may appear).
-            #[allow(unused_variables)]
+            #[allow(unused_variables, unused_mut, unused_assignments)]
             pub fn weights(
                 p: &SVector<Real, NP>,
                 w: &mut SMatrix<Real, NY, NY>,
@@ -1207,7 +1259,7 @@ pub(crate) fn ffi(l: &Lowered, opts: &Options) -> TokenStream {
                 core::mem::align_of::<Solver>()
             }
 
-            /// Builds a configured solver in `mem`.
+            /// Builds a configured solver in `mem`; `*out` is written only on success.
             ///
             /// # Safety
             /// `mem` points to `size` writable bytes that outlive the solver; `out` is
@@ -1223,12 +1275,18 @@ pub(crate) fn ffi(l: &Lowered, opts: &Options) -> TokenStream {
                 if !(mem as usize).is_multiple_of(core::mem::align_of::<Solver>()) {
                     return ERR_ALIGN;
                 }
+                /// Copied into the caller's memory, so that no solver-sized temporary is
+                /// built on the (possibly small) stack of the caller.
+                static UNCONFIGURED: Solver = Solver::unconfigured();
                 let s = mem.cast::<Solver>();
-                // SAFETY: checked non-null, large enough and aligned above.
+                // SAFETY: `mem` is non-null, large enough and aligned (checked above) and
+                // does not overlap the static.
                 unsafe {
-                    s.write(Solver::unconfigured());
+                    core::ptr::copy_nonoverlapping(&UNCONFIGURED, s, 1);
                     let r = code((*s).configure());
-                    out.write(s);
+                    if r == 0 {
+                        out.write(s);
+                    }
                     r
                 }
             }
@@ -1415,10 +1473,38 @@ pub(crate) fn ffi(l: &Lowered, opts: &Options) -> TokenStream {
 }
 
 /// Parses and pretty-prints a whole file.
-pub(crate) fn format_file(what: &str, tokens: TokenStream) -> Result<String, CodegenError> {
-    let file: syn::File = syn::parse2(tokens).map_err(|e| CodegenError::Emit {
+pub(crate) fn format_file(
+    what: &str,
+    tokens: TokenStream,
+    rustfmt_skip: bool,
+) -> Result<String, CodegenError> {
+    let mut file: syn::File = syn::parse2(tokens).map_err(|e| CodegenError::Emit {
         what: what.to_string(),
         message: e.to_string(),
     })?;
+    // The output is formatted by prettyplease; tell rustfmt (`cargo fmt` of a workspace
+    // that contains a generated crate) to leave it as it is.
+    for item in file.items.iter_mut().filter(|_| rustfmt_skip) {
+        if let Some(attrs) = item_attrs(item) {
+            attrs.insert(0, syn::parse_quote!(#[rustfmt::skip]));
+        }
+    }
     Ok(prettyplease::unparse(&file))
+}
+
+fn item_attrs(item: &mut syn::Item) -> Option<&mut Vec<syn::Attribute>> {
+    use syn::Item;
+    Some(match item {
+        Item::Const(i) => &mut i.attrs,
+        Item::Enum(i) => &mut i.attrs,
+        Item::ExternCrate(i) => &mut i.attrs,
+        Item::Fn(i) => &mut i.attrs,
+        Item::Impl(i) => &mut i.attrs,
+        Item::Mod(i) => &mut i.attrs,
+        Item::Static(i) => &mut i.attrs,
+        Item::Struct(i) => &mut i.attrs,
+        Item::Type(i) => &mut i.attrs,
+        Item::Use(i) => &mut i.attrs,
+        _ => return None,
+    })
 }

@@ -169,7 +169,7 @@ pub fn generate(ocp: &Ocp<'_>, opts: &Options) -> Result<GeneratedCrate, Codegen
         #items
         #ffi
     };
-    let body = emit::format_file("src/lib.rs", body_tokens)?;
+    let body = emit::format_file("src/lib.rs", body_tokens, true)?;
     let st = stamp(&l.name, &body, opts);
     let crate_doc = format!(
         "//! {st}\n//!\n//! NMPC solver for `{}`: horizon {}, {} s per interval, {}. See \
@@ -215,15 +215,15 @@ pub fn generate_module(
         l.name
     );
     let tokens = quote::quote! {
-        #[doc = #doc]
-        #[allow(unsafe_code)]
         pub mod #m {
+            #![doc = #doc]
+            #![allow(unsafe_code)]
             #allows
             #items
             #ffi
         }
     };
-    let body = emit::format_file(module, tokens)?;
+    let body = emit::format_file(module, tokens, false)?;
     Ok(format!("// {}\n{body}", stamp(&l.name, &body, opts)))
 }
 

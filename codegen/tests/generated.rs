@@ -465,3 +465,93 @@ fn paper_pointmass_input_rate_uses_u_prev() {
     let p = t.param(0).unwrap();
     assert_eq!(&p[m::PARAM_U_PREV], &u[..]);
 }
+
+/// `generated/quadrotor_probe` (14 states, mass parameters, a soft constraint): F equals the
+/// interpreter on the model's discrete map, [A B] equals finite differences, the soft
+/// constraint row is `beta` with its bounds and penalties; a closed loop on the model's own
+/// discretization reaches the hover point.
+#[test]
+fn quadrotor_probe_functions_constraint_and_closed_loop() {
+    use quadrotor_probe as m;
+    assert_eq!((m::NX, m::NU, m::NG), (14, 4, 1));
+    assert_eq!(
+        (m::LG, m::UG, m::L1, m::L2),
+        ([-1.4], [1.4], [100.0], [100.0])
+    );
+    with_model_file(&root().join("models/quadrotor_probe.mpc"), None, |ocp| {
+        let g = ocp.x()[0].graph();
+        let fd_map = ocp.discrete_map()?;
+        let mut rng = Rng(11);
+        for _ in 0..20 {
+            let (mut x, u, mut p) = random_point(&mut rng, m::NX, m::NU, m::NP);
+            x[3] += 1.0; // keep the quaternion away from zero
+            p[0] = 1.5; // masses
+            p[1] = 0.2;
+            let (xs, us, ps) = (
+                SVector::<f64, { m::NX }>::from_column_slice(&x),
+                SVector::<f64, { m::NU }>::from_column_slice(&u),
+                SVector::<f64, { m::NP }>::from_column_slice(&p),
+            );
+            let (mut a, mut b) = (SMatrix::zeros(), SMatrix::zeros());
+            let f = m::functions::dynamics(&xs, &us, &ps, &mut a, &mut b);
+            let want = interp(g, &fd_map, ocp, &x, &u, &p);
+            for i in 0..m::NX {
+                assert!(
+                    rel_close(f[i], want[i], 1e-12),
+                    "F[{i}]: {} vs {}",
+                    f[i],
+                    want[i]
+                );
+            }
+            let nz = m::NX + m::NU;
+            let z = DVector::from_iterator(nz, x.iter().chain(&u).copied());
+            let fnum = fd_jacobian(
+                |z| {
+                    let xs = SVector::<f64, { m::NX }>::from_fn(|i, _| z[i]);
+                    let us = SVector::<f64, { m::NU }>::from_fn(|i, _| z[m::NX + i]);
+                    let (mut a, mut b) = (SMatrix::zeros(), SMatrix::zeros());
+                    DVector::from_column_slice(
+                        m::functions::dynamics(&xs, &us, &ps, &mut a, &mut b).as_slice(),
+                    )
+                },
+                &z,
+            );
+            let mut ab = DMatrix::zeros(m::NX, nz);
+            ab.view_mut((0, 0), (m::NX, m::NX)).copy_from(&a);
+            ab.view_mut((0, m::NX), (m::NX, m::NU)).copy_from(&b);
+            assert_mat_close("[A B]", &ab, &fnum, 1e-5);
+            let (mut cx, mut cu) = (SMatrix::zeros(), SMatrix::zeros());
+            let h = m::functions::constraints(&xs, &us, &ps, &mut cx, &mut cu);
+            assert_eq!(h[0], x[11], "the soft row is beta = ang[1]");
+            let mut e = SMatrix::<f64, 1, { m::NX }>::zeros();
+            e[(0, 11)] = 1.0;
+            assert_eq!(cx, e);
+            assert!(cu.iter().all(|v| *v == 0.0));
+        }
+        Ok(())
+    })
+    .unwrap();
+    let mut s = Box::new(m::Solver::new());
+    let mut x = [0.0; m::NX_MODEL];
+    x[2] = 2.0;
+    x[3] = 1.0;
+    s.set_guess(&x, &[9.81, 0.0, 0.0, 0.0]).unwrap();
+    for k in 0..100 {
+        s.prepare();
+        s.set_x0(&x).unwrap();
+        let info = s.feedback();
+        assert_eq!(info.status, m::RtiStatus::Ok, "step {k}: {info:?}");
+        let (mut a, mut b) = (SMatrix::zeros(), SMatrix::zeros());
+        let p = SVector::from(s.param(0).unwrap());
+        let xn = m::functions::dynamics(
+            &SVector::from(x),
+            &SVector::from(s.u0()),
+            &p,
+            &mut a,
+            &mut b,
+        );
+        x = xn.into();
+    }
+    let err = ((x[0] - 4.0).powi(2) + x[1].powi(2) + (x[2] - 2.0).powi(2)).sqrt();
+    assert!(err < 0.05, "final position error {err} m, state {x:?}");
+}

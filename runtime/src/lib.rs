@@ -46,3 +46,12 @@ pub(crate) const fn zeros<T: Real, const R: usize, const C: usize>() -> SMatrix<
 pub(crate) const fn filled<T: Real, const R: usize, const C: usize>(v: T) -> SMatrix<T, R, C> {
     SMatrix::from_array_storage(ArrayStorage([[v; R]; C]))
 }
+
+/// Includes a solver module that `mpc_codegen::Builder` generated into `OUT_DIR` from a build
+/// script: `mpc_runtime::include_solver!("quadrotor");` then `quadrotor::Solver::new()`.
+#[macro_export]
+macro_rules! include_solver {
+    ($module:literal) => {
+        include!(concat!(env!("OUT_DIR"), "/", $module, ".rs"));
+    };
+}

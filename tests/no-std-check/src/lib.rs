@@ -1,6 +1,6 @@
-//! Instantiates the runtime's QP and RTI solvers in `f32` and `f64` for a QR-bench-sized
-//! problem with no standard library, so that `cargo build -p no-std-check --target
-//! thumbv7em-none-eabihf` proves they build bare-metal.
+//! Instantiates the runtime's QP and RTI solvers and the generated solvers of `generated/`
+//! in `f32` and `f64` for a QR-bench-sized problem with no standard library, so that
+//! `cargo build -p no-std-check --target thumbv7em-none-eabihf` proves they build bare-metal.
 #![no_std]
 #![forbid(unsafe_code)]
 
@@ -84,4 +84,30 @@ pub fn rti_step_f64(
     let r = s.feedback(x0);
     let _ = s.solve_sqp(x0);
     r
+}
+
+/// The generated QR-bench solver (f32, variant A), as a bare-metal application holds it: a
+/// `static` built by the `const fn`.
+pub static GENERATED_F32: quadrotor_rates_f32::Solver = quadrotor_rates_f32::Solver::unconfigured();
+
+/// One control step of the generated f32 solver (every generated path monomorphized).
+pub fn generated_step_f32(
+    s: &mut quadrotor_rates_f32::Solver,
+    x0: &[f32; quadrotor_rates_f32::NX_MODEL],
+) -> Option<[f32; quadrotor_rates_f32::NU]> {
+    s.prepare();
+    s.set_x0(x0).ok()?;
+    let info = s.feedback();
+    (info.status == quadrotor_rates_f32::RtiStatus::Ok).then(|| s.u0())
+}
+
+/// One control step of the generated f64 solver.
+pub fn generated_step_f64(
+    s: &mut quadrotor_rates::Solver,
+    x0: &[f64; quadrotor_rates::NX_MODEL],
+) -> Option<[f64; quadrotor_rates::NU]> {
+    s.prepare();
+    s.set_x0(x0).ok()?;
+    let info = s.feedback();
+    (info.status == quadrotor_rates::RtiStatus::Ok).then(|| s.u0())
 }

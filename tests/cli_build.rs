@@ -1,0 +1,106 @@
+//! `mpcc build`: writes a complete crate, `--check` detects drift, errors name the place.
+
+use std::path::Path;
+use std::process::Command;
+
+fn mpcc(args: &[&str]) -> (bool, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_mpcc"))
+        .args(args)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .expect("the mpcc binary runs");
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn build_writes_a_crate_and_check_detects_drift() {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("cli_build_pointmass");
+    let _ = std::fs::remove_dir_all(&dir);
+    let out = dir.to_str().unwrap();
+    let (ok, stdout, err) = mpcc(&["build", "models/paper_pointmass.mpc", "-o", out, "--f32"]);
+    assert!(ok, "{err}");
+    for f in ["Cargo.toml", "src/lib.rs", "include/paper_pointmass.h"] {
+        assert!(dir.join(f).is_file(), "{f} missing; {stdout}");
+    }
+    let lib = std::fs::read_to_string(dir.join("src/lib.rs")).unwrap();
+    assert!(lib.contains("#![no_std]") && lib.contains("pub type Real = f32;"));
+    let header = std::fs::read_to_string(dir.join("include/paper_pointmass.h")).unwrap();
+    assert!(header.contains("typedef float paper_pointmass_real;"));
+    let toml = std::fs::read_to_string(dir.join("Cargo.toml")).unwrap();
+    // The runtime dependency is a relative path to this checkout's runtime/.
+    let rel = toml
+        .lines()
+        .find_map(|l| l.strip_prefix("mpc-runtime = { path = \""))
+        .and_then(|r| r.split('"').next())
+        .expect("a path dependency on mpc-runtime");
+    assert!(!rel.starts_with('/'), "{rel}");
+    assert!(dir.join(rel).join("src/lib.rs").is_file(), "{rel}");
+
+    let (ok, stdout, _) = mpcc(&[
+        "build",
+        "models/paper_pointmass.mpc",
+        "-o",
+        out,
+        "--f32",
+        "--check",
+    ]);
+    assert!(ok && stdout.contains("up to date"), "{stdout}");
+    // f64 output differs from the f32 crate on disk.
+    let (ok, _, err) = mpcc(&["build", "models/paper_pointmass.mpc", "-o", out, "--check"]);
+    assert!(!ok);
+    assert!(err.contains("src/lib.rs: differs"), "{err}");
+    // A hand edit is detected, and a rebuild restores the file.
+    std::fs::write(dir.join("src/lib.rs"), format!("{lib}\n// edited\n")).unwrap();
+    let (ok, _, err) = mpcc(&[
+        "build",
+        "models/paper_pointmass.mpc",
+        "-o",
+        out,
+        "--f32",
+        "--check",
+    ]);
+    assert!(!ok && err.contains("regenerate with"), "{err}");
+    let (ok, _, _) = mpcc(&["build", "models/paper_pointmass.mpc", "-o", out, "--f32"]);
+    assert!(ok);
+    assert_eq!(
+        std::fs::read_to_string(dir.join("src/lib.rs")).unwrap(),
+        lib
+    );
+}
+
+#[test]
+fn build_reports_errors_with_file_line_and_column() {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR"));
+    let bad = dir.join("bad_build.mpc");
+    std::fs::write(
+        &bad,
+        "model wstage;\nstate x;\ncontrol u;\nparam w stage default 1;\n\
+         dynamics ode euler { der(x) = u; }\nhorizon N = 5, dt = 0.1;\n\
+         cost { Q = diag(w) ref [0]; }\n",
+    )
+    .unwrap();
+    let out = dir.join("bad_build_out");
+    let _ = std::fs::remove_dir_all(&out);
+    let (ok, _, err) = mpcc(&["build", bad.to_str().unwrap(), "-o", out.to_str().unwrap()]);
+    assert!(!ok);
+    assert!(err.contains("bad_build.mpc:7:8"), "{err}");
+    assert!(err.contains("global parameters only"), "{err}");
+    assert!(!out.exists(), "nothing is written on error");
+
+    let (ok, _, err) = mpcc(&[
+        "build",
+        "models/paper_pointmass.mpc",
+        "-o",
+        out.to_str().unwrap(),
+        "--name",
+        "loop",
+    ]);
+    assert!(!ok);
+    assert!(err.contains("`loop` is not usable"), "{err}");
+    let (ok, _, err) = mpcc(&["build", "no/such.mpc", "-o", out.to_str().unwrap()]);
+    assert!(!ok && err.contains("no/such.mpc"), "{err}");
+}
