@@ -115,7 +115,7 @@ fn body(
     let mut late = Vec::new();
     for (o, t) in f.program.outputs().iter().zip(&f.outputs) {
         match *o {
-            Operand::Const(c) if c == 0.0 => {} // zeros are already there
+            Operand::Const(0.0) => {} // zeros are already there
             Operand::Temp(k) => writes_at[k as usize].push((*o, *t)),
             _ => late.push((*o, *t)),
         }

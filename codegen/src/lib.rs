@@ -126,6 +126,7 @@ fn allows() -> proc_macro2::TokenStream {
             clippy::needless_range_loop,
             clippy::let_and_return,
             clippy::manual_memcpy,
+            clippy::assign_op_pattern,
             unused_parens
         )]
     }
