@@ -80,9 +80,9 @@ fn main() -> ExitCode {
     match cli.command {
         Command::Sim { mission } => {
             eprintln!(
-                "mpcc sim --mission {mission}: not yet available. The simulator, the code \
-                 generator and the runtime solver are still being built; today mpcc ships its \
-                 symbolic core (mpc-dsl). Run the test suite to see what works."
+                "mpcc sim --mission {mission}: not yet available: the simulator is still being \
+                 built. Today mpcc ships its symbolic core, the runtime solver and the code \
+                 generator (`mpcc build MODEL.mpc -o DIR`; see docs/codegen.md)."
             );
             ExitCode::FAILURE
         }
