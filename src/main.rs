@@ -5,6 +5,8 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
+
+mod sim;
 use mpc_dsl::lang::{ParseOptions, parse};
 use mpc_dsl::ocp::{Dynamics, Integrator, Ocp, ParamKind, Variable};
 use mpc_dsl::{Expr, ExprKind, Graph, Sparsity};
@@ -19,12 +21,9 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Generate the paper's flip solver and fly the flip mission in the simulator.
-    Sim {
-        /// Mission to fly.
-        #[arg(long, default_value = "flip")]
-        mission: String,
-    },
+    /// Fly a mission in the closed-loop simulator with a generated solver; print a summary,
+    /// write a CSV log and PNG plots.
+    Sim(SimArgs),
     /// Parse and validate a `.mpc` file; print its dimensions, the size of the dynamics
     /// before and after common-subexpression elimination, and the Jacobian sparsity.
     Check {
@@ -36,6 +35,41 @@ enum Command {
     },
     /// Generate a solver crate (Rust, `no_std`, with a C header) from a `.mpc` file.
     Build(BuildArgs),
+}
+
+#[derive(clap::Args)]
+struct SimArgs {
+    /// Mission: flip (the paper's), hover, step (flip-throw: issue 8, not yet available).
+    #[arg(long, default_value = "flip")]
+    mission: String,
+    /// Outer loop: paper (point-mass MPC + geometric attitude) or nmpc (quaternion NMPC).
+    #[arg(long, default_value = "paper")]
+    controller: String,
+    /// Number of trials (seeds S, S+1, ...).
+    #[arg(long, default_value_t = 1)]
+    trials: usize,
+    /// Seed of the first trial.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Monte Carlo: draw mass +-20 %, inertia +-30 %, rotor time constant 20-40 ms, sensing
+    /// latency 0-10 ms and a wind gust for every trial.
+    #[arg(long)]
+    randomize: bool,
+    /// No estimation noise or latency (the true state).
+    #[arg(long)]
+    perfect_sensing: bool,
+    /// The paper's trial 9: lose the pose at this many seconds into the flip, for good.
+    #[arg(long, value_name = "SECONDS")]
+    pose_loss: Option<f64>,
+    /// Output directory of the CSV log and the plots (of the first trial).
+    #[arg(long, default_value = "sim-out")]
+    out: PathBuf,
+    /// Write no CSV or plots.
+    #[arg(long)]
+    no_plots: bool,
+    /// Print the summary as one JSON object on stdout (and nothing else there).
+    #[arg(long)]
+    json: bool,
 }
 
 #[derive(clap::Args)]
@@ -78,14 +112,7 @@ struct BuildArgs {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     match cli.command {
-        Command::Sim { mission } => {
-            eprintln!(
-                "mpcc sim --mission {mission}: not yet available: the simulator is still being \
-                 built. Today mpcc ships its symbolic core, the runtime solver and the code \
-                 generator (`mpcc build MODEL.mpc -o DIR`; see docs/codegen.md)."
-            );
-            ExitCode::FAILURE
-        }
+        Command::Sim(args) => sim::run(&args),
         Command::Check { file, variant } => check(&file, variant),
         Command::Build(args) => build(&args),
     }

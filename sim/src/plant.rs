@@ -1,0 +1,576 @@
+//! The quadrotor plant: a 6-DoF rigid body with four first-order rotors, linear drag,
+//! external disturbances and a flat ground plane at `z = 0`.
+//!
+//! # Conventions
+//!
+//! * World frame ENU: x east/forward, y north/left, **z up**. Gravity is `-g e_z`.
+//! * Body frame FLU: x forward (nose), y left, z up (thrust direction).
+//! * Attitude `q` is a Hamilton unit quaternion, scalar first, rotating **body to world**
+//!   (`v_world = q * v_body`, `R = R(q)`).
+//! * Body rates `w` are expressed in the body frame. A positive pitch rate (about body +y,
+//!   i.e. left) tips the nose **down**: `R_y(theta) e_x = (cos theta, 0, -sin theta)`.
+//! * Rotors are in X configuration at 45 degrees, numbered like PX4's quad X:
+//!   `0` front-right, `1` rear-left, `2` front-left, `3` rear-right
+//!   (see [`QuadParams::rotor_positions`] and [`QuadParams::rotor_spin`]).
+//!
+//! # Dynamics
+//!
+//! ```text
+//! p' = v
+//! v' = (R (0, 0, sum f_i) - R diag(drag) R^T (v - wind) + dist.force) / m - g e_z
+//! q' = 1/2 q (x) (0, w)                      (renormalised after every step)
+//! J w' = tau - w x J w,   tau = sum r_i x (0, 0, f_i) + (0, 0, sum s_i k_torque f_i) + dist.torque
+//! omega_i' = (clamp(cmd_i, omega_min, omega_max) - omega_i) / rotor_tau,   f_i = k_thrust omega_i^2
+//! ```
+//!
+//! All 17 continuous states are advanced together by one classical Runge-Kutta 4 step per
+//! [`Plant::step`]; the disturbance and the rotor commands are held constant over the step.
+//!
+//! # Ground contact
+//!
+//! The ground is the plane `z = 0`. While [`Contact::OnGround`], the vehicle is held
+//! (`z = 0`, `v = 0`, `w = 0`, attitude and horizontal position kept) until the vertical
+//! component of the non-gravitational force exceeds the weight (lift-off). When airborne and
+//! `z` becomes negative, the impact is evaluated: a vertical speed above
+//! [`MAX_TOUCHDOWN_VERTICAL_SPEED`], a horizontal speed above
+//! [`MAX_TOUCHDOWN_HORIZONTAL_SPEED`] or a tilt above [`MAX_TOUCHDOWN_TILT`] is a
+//! [`Contact::Crash`]; otherwise it is a [`Contact::Touchdown`] and the vehicle is on the
+//! ground from then on. A crash freezes the plant: further [`Plant::step`] calls do nothing
+//! and return the same crash. Any non-finite input or state is a crash
+//! ([`CrashReason::NonFinite`]); the state is never left non-finite.
+
+use nalgebra::{Quaternion, SVector, UnitQuaternion, Vector3};
+
+/// Touchdown vertical speed (m/s, downward) above which an impact is a crash.
+pub const MAX_TOUCHDOWN_VERTICAL_SPEED: f64 = 1.5;
+/// Touchdown horizontal speed (m/s) above which an impact is a crash.
+pub const MAX_TOUCHDOWN_HORIZONTAL_SPEED: f64 = 1.5;
+/// Touchdown tilt (rad, angle between body z and world z) above which an impact is a crash
+/// (0.6 rad, about 35 degrees).
+pub const MAX_TOUCHDOWN_TILT: f64 = 0.6;
+
+/// Speed (m/s) below which a state at or below the ground plane counts as resting on it.
+const REST_SPEED: f64 = 1e-9;
+
+/// Physical parameters of the quadrotor.
+#[derive(Clone, Debug, PartialEq)]
+pub struct QuadParams {
+    /// Mass, kg.
+    pub mass: f64,
+    /// Diagonal of the inertia tensor (Ixx, Iyy, Izz) in body axes, kg m^2.
+    pub inertia: Vector3<f64>,
+    /// Distance from the centre of gravity to each rotor axis, m (rotors at 45 degrees, X).
+    pub arm: f64,
+    /// Time constant of the first-order rotor-speed response, s.
+    pub rotor_tau: f64,
+    /// Thrust coefficient, N/(rad/s)^2: `f = k_thrust omega^2`.
+    pub k_thrust: f64,
+    /// Yaw drag-torque coefficient, m: a rotor's yaw torque is `spin * k_torque * f`.
+    pub k_torque: f64,
+    /// Maximum rotor speed (motor saturation), rad/s.
+    pub omega_max: f64,
+    /// Minimum rotor speed (idle), rad/s.
+    pub omega_min: f64,
+    /// Linear aerodynamic drag coefficients in body axes, N/(m/s), acting on the
+    /// air-relative velocity.
+    pub drag: Vector3<f64>,
+    /// Gravitational acceleration, m/s^2.
+    pub g: f64,
+}
+
+impl Default for QuadParams {
+    /// A small agile racing-class quadrotor:
+    ///
+    /// * `mass` 1.0 kg;
+    /// * `inertia` (0.006, 0.006, 0.011) kg m^2;
+    /// * `arm` 0.17 m (lever about x and y: 0.17/sqrt(2) = 0.120 m);
+    /// * `rotor_tau` 0.03 s;
+    /// * `k_thrust` 1.25e-6 N/(rad/s)^2 and `omega_max` 2800 rad/s, so a rotor gives at most
+    ///   9.8 N and the thrust-to-weight ratio is about 4.0; hover is at 1401 rad/s;
+    /// * `k_torque` 0.016 m;
+    /// * `omega_min` 0 rad/s (no idle);
+    /// * `drag` (0.10, 0.10, 0.15) N/(m/s);
+    /// * `g` 9.81 m/s^2.
+    ///
+    /// The maximum pitch torque is 2 * 0.120 m * 9.8 N = 2.36 N m, an angular acceleration of
+    /// about 390 rad/s^2: enough to reach the 5*pi rad/s (15.7 rad/s) rate of a flip in about
+    /// 0.04 s plus the rotor lag.
+    fn default() -> Self {
+        Self {
+            mass: 1.0,
+            inertia: Vector3::new(0.006, 0.006, 0.011),
+            arm: 0.17,
+            rotor_tau: 0.03,
+            k_thrust: 1.25e-6,
+            k_torque: 0.016,
+            omega_max: 2800.0,
+            omega_min: 0.0,
+            drag: Vector3::new(0.10, 0.10, 0.15),
+            g: 9.81,
+        }
+    }
+}
+
+impl QuadParams {
+    /// Maximum thrust of one rotor, N: `k_thrust * omega_max^2`.
+    pub fn rotor_thrust_max(&self) -> f64 {
+        self.k_thrust * self.omega_max * self.omega_max
+    }
+
+    /// Minimum thrust of one rotor, N: `k_thrust * omega_min^2`.
+    pub fn rotor_thrust_min(&self) -> f64 {
+        self.k_thrust * self.omega_min * self.omega_min
+    }
+
+    /// Thrust-to-weight ratio with all rotors at `omega_max`.
+    pub fn thrust_to_weight(&self) -> f64 {
+        4.0 * self.rotor_thrust_max() / (self.mass * self.g)
+    }
+
+    /// Collective thrust that balances the weight, N.
+    pub fn hover_thrust(&self) -> f64 {
+        self.mass * self.g
+    }
+
+    /// Rotor speed at which the four rotors together balance the weight, rad/s.
+    pub fn hover_rotor_speed(&self) -> f64 {
+        (self.hover_thrust() / (4.0 * self.k_thrust))
+            .max(0.0)
+            .sqrt()
+    }
+
+    /// Rotor positions in the body frame (FLU), m, in the order
+    /// front-right, rear-left, front-left, rear-right.
+    pub fn rotor_positions(&self) -> [Vector3<f64>; 4] {
+        let a = self.arm * std::f64::consts::FRAC_1_SQRT_2;
+        [
+            Vector3::new(a, -a, 0.0),
+            Vector3::new(-a, a, 0.0),
+            Vector3::new(a, a, 0.0),
+            Vector3::new(-a, -a, 0.0),
+        ]
+    }
+
+    /// Sign of each rotor's yaw drag torque on the airframe (about body +z):
+    /// `[-1, -1, +1, +1]`.
+    ///
+    /// A rotor turning counter-clockwise seen from above (front-right and rear-left, as in
+    /// PX4) drags the airframe clockwise, hence `-1`; the clockwise rotors (front-left,
+    /// rear-right) give `+1`. The yaw torque is `sum spin_i * k_torque * f_i`.
+    pub fn rotor_spin(&self) -> [f64; 4] {
+        [-1.0, -1.0, 1.0, 1.0]
+    }
+}
+
+/// Full continuous state of the plant.
+#[derive(Clone, Debug, PartialEq)]
+pub struct QuadState {
+    /// Position of the centre of gravity in the world frame, m.
+    pub p: Vector3<f64>,
+    /// Velocity in the world frame, m/s.
+    pub v: Vector3<f64>,
+    /// Attitude, body to world.
+    pub q: UnitQuaternion<f64>,
+    /// Body angular rates (body frame), rad/s.
+    pub w: Vector3<f64>,
+    /// Rotor speeds, rad/s, in the order of [`QuadParams::rotor_positions`].
+    pub omega: [f64; 4],
+}
+
+impl QuadState {
+    /// Level, at rest at `p`, rotors stopped.
+    pub fn at_rest(p: Vector3<f64>) -> Self {
+        Self {
+            p,
+            v: Vector3::zeros(),
+            q: UnitQuaternion::identity(),
+            w: Vector3::zeros(),
+            omega: [0.0; 4],
+        }
+    }
+
+    /// Level hover at `p` with the rotors at the hover speed of `params`.
+    pub fn hovering(p: Vector3<f64>, params: &QuadParams) -> Self {
+        Self {
+            omega: [params.hover_rotor_speed(); 4],
+            ..Self::at_rest(p)
+        }
+    }
+
+    /// Whether every component is finite.
+    pub fn is_finite(&self) -> bool {
+        self.p.iter().all(|x| x.is_finite())
+            && self.v.iter().all(|x| x.is_finite())
+            && self.q.coords.iter().all(|x| x.is_finite())
+            && self.w.iter().all(|x| x.is_finite())
+            && self.omega.iter().all(|x| x.is_finite())
+    }
+
+    /// Tilt, rad: the angle between body z and world z.
+    pub fn tilt(&self) -> f64 {
+        let bz = self.q * Vector3::z();
+        bz.z.clamp(-1.0, 1.0).acos()
+    }
+}
+
+/// External disturbances, held constant over a step. `Default` is no disturbance.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Disturbance {
+    /// Air velocity in the world frame (wind), m/s.
+    pub wind: Vector3<f64>,
+    /// Extra force at the centre of gravity, world frame, N.
+    pub force: Vector3<f64>,
+    /// Extra torque, body frame, N m.
+    pub torque: Vector3<f64>,
+}
+
+/// Why the plant crashed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CrashReason {
+    /// Hit the ground faster than [`MAX_TOUCHDOWN_VERTICAL_SPEED`].
+    VerticalSpeed,
+    /// Hit the ground more tilted than [`MAX_TOUCHDOWN_TILT`].
+    Tilt,
+    /// Hit the ground faster than [`MAX_TOUCHDOWN_HORIZONTAL_SPEED`] horizontally.
+    HorizontalSpeed,
+    /// A non-finite input (rotor command, disturbance, time step) or state.
+    NonFinite,
+}
+
+/// Contact status reported by [`Plant::step`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Contact {
+    /// Flying.
+    Airborne,
+    /// Resting on the ground plane (held at `z = 0`).
+    OnGround,
+    /// A soft landing happened during this step; the vehicle is now on the ground.
+    Touchdown {
+        /// Downward speed at impact, m/s.
+        vertical_speed: f64,
+        /// Horizontal speed at impact, m/s.
+        horizontal_speed: f64,
+        /// Tilt at impact, rad.
+        tilt: f64,
+    },
+    /// The vehicle crashed (now or earlier); the plant is frozen.
+    Crash {
+        /// Why.
+        reason: CrashReason,
+        /// Downward speed at the crash, m/s (of the last finite state for `NonFinite`).
+        vertical_speed: f64,
+        /// Horizontal speed at the crash, m/s (of the last finite state for `NonFinite`).
+        horizontal_speed: f64,
+        /// Tilt at the crash, rad (of the last finite state for `NonFinite`).
+        tilt: f64,
+        /// Simulated time of the crash, s.
+        time: f64,
+    },
+}
+
+impl Contact {
+    /// Whether this is a [`Contact::Crash`].
+    pub fn is_crash(&self) -> bool {
+        matches!(self, Contact::Crash { .. })
+    }
+}
+
+/// Internal contact mode.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Mode {
+    Airborne,
+    OnGround,
+    Crashed(Contact),
+}
+
+type Vec17 = SVector<f64, 17>;
+
+/// The simulated quadrotor.
+#[derive(Clone, Debug)]
+pub struct Plant {
+    /// True physical parameters.
+    pub params: QuadParams,
+    state: QuadState,
+    mode: Mode,
+    last: Contact,
+    time: f64,
+    last_dist: Disturbance,
+}
+
+impl Plant {
+    /// A plant in `state`. A state at `z <= 0` with zero velocity starts
+    /// [`Contact::OnGround`] (and is put on the plane `z = 0`); anything else starts
+    /// airborne. The time starts at 0.
+    pub fn new(params: QuadParams, state: QuadState) -> Self {
+        let mut plant = Self {
+            params,
+            state: QuadState::at_rest(Vector3::zeros()),
+            mode: Mode::Airborne,
+            last: Contact::Airborne,
+            time: 0.0,
+            last_dist: Disturbance::default(),
+        };
+        plant.set_state(state);
+        plant
+    }
+
+    /// Current state.
+    pub fn state(&self) -> &QuadState {
+        &self.state
+    }
+
+    /// Replaces the state (clearing any crash), with the same ground rule as [`Plant::new`].
+    /// A non-finite state is a [`CrashReason::NonFinite`] crash.
+    pub fn set_state(&mut self, s: QuadState) {
+        if !s.is_finite() {
+            let c = Contact::Crash {
+                reason: CrashReason::NonFinite,
+                vertical_speed: 0.0,
+                horizontal_speed: 0.0,
+                tilt: 0.0,
+                time: self.time,
+            };
+            self.state = QuadState::at_rest(Vector3::zeros());
+            self.mode = Mode::Crashed(c);
+            self.last = c;
+            return;
+        }
+        self.state = s;
+        if self.state.p.z <= 0.0 && self.state.v.norm() <= REST_SPEED {
+            self.state.p.z = 0.0;
+            self.state.v = Vector3::zeros();
+            self.state.w = Vector3::zeros();
+            self.mode = Mode::OnGround;
+            self.last = Contact::OnGround;
+        } else {
+            self.mode = Mode::Airborne;
+            self.last = Contact::Airborne;
+        }
+    }
+
+    /// Simulated time, s (sum of the `dt` of all effective steps).
+    pub fn time(&self) -> f64 {
+        self.time
+    }
+
+    /// The contact status returned by the last step (or set by [`Plant::new`]).
+    pub fn contact(&self) -> Contact {
+        self.last
+    }
+
+    /// The crash, if the plant has crashed (always a [`Contact::Crash`]).
+    pub fn crashed(&self) -> Option<Contact> {
+        match self.mode {
+            Mode::Crashed(c) => Some(c),
+            _ => None,
+        }
+    }
+
+    /// Current rotor thrusts, N.
+    pub fn rotor_thrusts(&self) -> [f64; 4] {
+        let k = self.params.k_thrust;
+        self.state.omega.map(|o| k * o * o.abs())
+    }
+
+    /// Current collective thrust, N.
+    pub fn collective_thrust(&self) -> f64 {
+        self.rotor_thrusts().iter().sum()
+    }
+
+    /// Specific acceleration (what an accelerometer measures), body frame, m/s^2: the
+    /// non-gravitational force over the mass, with the last step's disturbance. On the
+    /// ground it is the support force, `R^T (0, 0, g)`.
+    pub fn specific_acceleration(&self) -> Vector3<f64> {
+        let s = &self.state;
+        match self.mode {
+            Mode::OnGround | Mode::Crashed(_) => {
+                s.q.inverse_transform_vector(&Vector3::new(0.0, 0.0, self.params.g))
+            }
+            Mode::Airborne => {
+                let f_world = self.nongravity_force(s, &self.last_dist);
+                s.q.inverse_transform_vector(&f_world) / self.params.mass
+            }
+        }
+    }
+
+    /// Non-gravitational force in the world frame: thrust, drag, disturbance.
+    fn nongravity_force(&self, s: &QuadState, dist: &Disturbance) -> Vector3<f64> {
+        let k = self.params.k_thrust;
+        let thrust: f64 = s.omega.iter().map(|o| k * o * o.abs()).sum();
+        let v_air_body = s.q.inverse_transform_vector(&(s.v - dist.wind));
+        let drag_body = self.params.drag.component_mul(&v_air_body);
+        s.q * (Vector3::new(0.0, 0.0, thrust) - drag_body) + dist.force
+    }
+
+    /// Advances the plant by `dt` seconds with rotor speed commands `rotor_cmd` (rad/s,
+    /// clamped to `[omega_min, omega_max]`) and the disturbance `dist`, by one RK4 step.
+    ///
+    /// Returns the contact status; see the [module documentation](self). Once crashed, does
+    /// nothing and returns the crash. A `dt <= 0` does nothing and returns the last status.
+    pub fn step(&mut self, rotor_cmd: &[f64; 4], dist: &Disturbance, dt: f64) -> Contact {
+        if let Mode::Crashed(c) = self.mode {
+            return c;
+        }
+        let inputs_finite = rotor_cmd.iter().all(|x| x.is_finite())
+            && dist.wind.iter().all(|x| x.is_finite())
+            && dist.force.iter().all(|x| x.is_finite())
+            && dist.torque.iter().all(|x| x.is_finite())
+            && dt.is_finite();
+        if !inputs_finite {
+            return self.crash(CrashReason::NonFinite, &self.state.clone());
+        }
+        if dt <= 0.0 {
+            return self.last;
+        }
+        let lo = self.params.omega_min;
+        let hi = self.params.omega_max.max(lo);
+        let cmd = rotor_cmd.map(|c| c.clamp(lo, hi));
+        self.last_dist = *dist;
+
+        let old = self.state.clone();
+        let on_ground = self.mode == Mode::OnGround;
+        let lift_off = on_ground && {
+            let f = self.nongravity_force(&old, dist);
+            f.z > self.params.mass * self.params.g
+        };
+
+        let x0 = pack(&old);
+        let f = |x: &Vec17| self.derivative(x, &cmd, dist);
+        let k1 = f(&x0);
+        let k2 = f(&(x0 + k1 * (0.5 * dt)));
+        let k3 = f(&(x0 + k2 * (0.5 * dt)));
+        let k4 = f(&(x0 + k3 * dt));
+        let x1 = x0 + (k1 + k2 * 2.0 + k3 * 2.0 + k4) * (dt / 6.0);
+        let mut new = unpack(&x1);
+        if !new.is_finite() {
+            return self.crash(CrashReason::NonFinite, &old);
+        }
+        self.time += dt;
+
+        if on_ground && (!lift_off || new.p.z <= 0.0) {
+            // Held on the ground: only the rotors move.
+            let mut held = old;
+            held.p.z = 0.0;
+            held.v = Vector3::zeros();
+            held.w = Vector3::zeros();
+            held.omega = new.omega;
+            self.state = held;
+            self.mode = Mode::OnGround;
+            self.last = Contact::OnGround;
+            return self.last;
+        }
+
+        if new.p.z < 0.0 {
+            let (vs, hs, tilt) = impact(&new);
+            let reason = if vs > MAX_TOUCHDOWN_VERTICAL_SPEED {
+                Some(CrashReason::VerticalSpeed)
+            } else if tilt > MAX_TOUCHDOWN_TILT {
+                Some(CrashReason::Tilt)
+            } else if hs > MAX_TOUCHDOWN_HORIZONTAL_SPEED {
+                Some(CrashReason::HorizontalSpeed)
+            } else {
+                None
+            };
+            new.p.z = 0.0;
+            if let Some(r) = reason {
+                return self.crash(r, &new);
+            }
+            new.v = Vector3::zeros();
+            new.w = Vector3::zeros();
+            self.state = new;
+            self.mode = Mode::OnGround;
+            self.last = Contact::Touchdown {
+                vertical_speed: vs,
+                horizontal_speed: hs,
+                tilt,
+            };
+            return self.last;
+        }
+
+        self.state = new;
+        self.mode = Mode::Airborne;
+        self.last = Contact::Airborne;
+        self.last
+    }
+
+    /// Freezes the plant in `at` with a crash of `reason`.
+    fn crash(&mut self, reason: CrashReason, at: &QuadState) -> Contact {
+        let (vertical_speed, horizontal_speed, tilt) = impact(at);
+        let c = Contact::Crash {
+            reason,
+            vertical_speed,
+            horizontal_speed,
+            tilt,
+            time: self.time,
+        };
+        self.state = at.clone();
+        self.mode = Mode::Crashed(c);
+        self.last = c;
+        c
+    }
+
+    /// Time derivative of the packed state.
+    fn derivative(&self, x: &Vec17, cmd: &[f64; 4], dist: &Disturbance) -> Vec17 {
+        let prm = &self.params;
+        let s = unpack(x);
+        let qraw = Quaternion::new(x[6], x[7], x[8], x[9]);
+        let thrusts = s.omega.map(|o| prm.k_thrust * o * o.abs());
+
+        let vdot = self.nongravity_force(&s, dist) / prm.mass - Vector3::new(0.0, 0.0, prm.g);
+        let qdot = qraw * Quaternion::new(0.0, s.w.x, s.w.y, s.w.z) * 0.5;
+
+        let pos = prm.rotor_positions();
+        let spin = prm.rotor_spin();
+        let mut tau = dist.torque;
+        for i in 0..4 {
+            tau += pos[i].cross(&Vector3::new(0.0, 0.0, thrusts[i]));
+            tau.z += spin[i] * prm.k_torque * thrusts[i];
+        }
+        let j = prm.inertia;
+        let wdot = (tau - s.w.cross(&j.component_mul(&s.w))).component_div(&j);
+
+        let mut d = Vec17::zeros();
+        d.fixed_rows_mut::<3>(0).copy_from(&s.v);
+        d.fixed_rows_mut::<3>(3).copy_from(&vdot);
+        d[6] = qdot.w;
+        d[7] = qdot.i;
+        d[8] = qdot.j;
+        d[9] = qdot.k;
+        d.fixed_rows_mut::<3>(10).copy_from(&wdot);
+        for i in 0..4 {
+            d[13 + i] = (cmd[i] - s.omega[i]) / prm.rotor_tau;
+        }
+        d
+    }
+}
+
+/// (downward speed, horizontal speed, tilt) of a state.
+fn impact(s: &QuadState) -> (f64, f64, f64) {
+    (-s.v.z, s.v.xy().norm(), s.tilt())
+}
+
+fn pack(s: &QuadState) -> Vec17 {
+    let mut x = Vec17::zeros();
+    x.fixed_rows_mut::<3>(0).copy_from(&s.p);
+    x.fixed_rows_mut::<3>(3).copy_from(&s.v);
+    let q = s.q.quaternion();
+    x[6] = q.w;
+    x[7] = q.i;
+    x[8] = q.j;
+    x[9] = q.k;
+    x.fixed_rows_mut::<3>(10).copy_from(&s.w);
+    for i in 0..4 {
+        x[13 + i] = s.omega[i];
+    }
+    x
+}
+
+fn unpack(x: &Vec17) -> QuadState {
+    QuadState {
+        p: x.fixed_rows::<3>(0).into_owned(),
+        v: x.fixed_rows::<3>(3).into_owned(),
+        q: UnitQuaternion::new_normalize(Quaternion::new(x[6], x[7], x[8], x[9])),
+        w: x.fixed_rows::<3>(10).into_owned(),
+        omega: [x[13], x[14], x[15], x[16]],
+    }
+}

@@ -1,0 +1,647 @@
+//! Trial and run summaries: the figures the acceptance criteria are judged on, the table the
+//! CLI prints and the JSON object of `mpcc sim --json`.
+//!
+//! Definitions (per phase, from the 1 kHz log of the true state):
+//! - tracking error: |p - p_ref| (m); `tracking_error_pct` is its RMS over the phase
+//!   relative to the length of the phase's reference path (at least 1 m), in percent. For the
+//!   flip, `rate_tracking_error_pct` is the mean |wy - wy_ref| over the flip relative to the
+//!   reference rate (the paper's "tracking error under 10 %" reads naturally as either).
+//! - recovery time (recover phase): from the flip's end until the vehicle is within
+//!   [`RECOVERY_TOL_M`] of the rally point and stays there for the rest of the hold.
+//! - altitude loss: height at the phase's start minus the lowest height in it.
+//! - solver time: wall-clock time of each outer-loop step (references, prepare, feedback).
+
+use core::f64::consts::PI;
+use std::fmt::Write as _;
+
+use nalgebra::Vector3;
+use serde::Serialize;
+
+use crate::log::Sample;
+use crate::mission::{MissionKind, Phase};
+use crate::run::{Outcome, TrialResult};
+
+/// Distance to the rally point that counts as recovered [m].
+pub const RECOVERY_TOL_M: f64 = 0.10;
+/// Longest acceptable recovery after the flip [s].
+pub const RECOVERY_LIMIT_S: f64 = 3.0;
+/// Lowest acceptable height from the ascent to the end of the hold [m].
+pub const MIN_FLIGHT_ALTITUDE_M: f64 = 1.0;
+/// Fastest acceptable touchdown [m/s].
+pub const MAX_TOUCHDOWN_SPEED: f64 = 0.5;
+/// Fraction of the flip's rate reference that must be reached.
+pub const MIN_RATE_FRACTION: f64 = 0.9;
+/// Return mode must engage this soon after the pose is lost [s].
+pub const FAILSAFE_DELAY_LIMIT_S: f64 = 0.2;
+/// Touchdown this close to the landing point counts as landed there [m] (0.5 m in return
+/// mode, which flies on dead reckoning).
+pub const LANDING_TOL_M: f64 = 0.25;
+
+/// Mean, 99th percentile and maximum.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct TimeStats {
+    /// Mean.
+    pub mean: f64,
+    /// 99th percentile (nearest rank).
+    pub p99: f64,
+    /// Maximum.
+    pub max: f64,
+    /// Number of values.
+    pub count: usize,
+}
+
+impl TimeStats {
+    /// Statistics of `values` (NaN ignored); zeros when empty.
+    pub fn of(values: impl IntoIterator<Item = f64>) -> Self {
+        let mut v: Vec<f64> = values.into_iter().filter(|x| x.is_finite()).collect();
+        if v.is_empty() {
+            return Self::default();
+        }
+        v.sort_by(f64::total_cmp);
+        let n = v.len();
+        let rank = ((0.99 * n as f64).ceil() as usize).clamp(1, n) - 1;
+        Self {
+            mean: v.iter().sum::<f64>() / n as f64,
+            p99: v.get(rank).copied().unwrap_or_default(),
+            max: v.last().copied().unwrap_or_default(),
+            count: n,
+        }
+    }
+}
+
+/// The figures of one phase of one trial.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct PhaseSummary {
+    /// Phase name.
+    pub phase: String,
+    /// Start [s].
+    pub start_s: f64,
+    /// Duration [s].
+    pub duration_s: f64,
+    /// Largest position error [m].
+    pub max_tracking_error_m: f64,
+    /// RMS position error [m].
+    pub rms_tracking_error_m: f64,
+    /// RMS position error relative to the reference path length (at least 1 m) [%].
+    pub tracking_error_pct: f64,
+    /// Mean pitch-rate error relative to the reference rate [%] (phases with a rate
+    /// reference only).
+    pub rate_tracking_error_pct: Option<f64>,
+    /// Recovery time after the flip [s] (the recover phase; `None` if never recovered).
+    pub recovery_time_s: Option<f64>,
+    /// Lowest height [m].
+    pub min_altitude_m: f64,
+    /// Height lost in the phase [m].
+    pub altitude_loss_m: f64,
+    /// Largest |pitch rate| [rad/s].
+    pub peak_pitch_rate_rad_s: f64,
+    /// Solver time per outer step [us].
+    pub solver_time_us: TimeStats,
+    /// Outer steps that fell back to the previous plan.
+    pub fallbacks: u32,
+}
+
+/// The figures of one trial.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct TrialSummary {
+    /// Seed of the trial.
+    pub seed: u64,
+    /// Whether every criterion held.
+    pub success: bool,
+    /// The criteria that failed, in words.
+    pub failures: Vec<String>,
+    /// How it ended: landed, crashed (why), timeout.
+    pub outcome: String,
+    /// Per phase, in the order flown.
+    pub phases: Vec<PhaseSummary>,
+    /// Total pitch rotation of the flip (largest accumulated) [rad].
+    pub flip_rotation_rad: Option<f64>,
+    /// Largest |pitch rate| in the flip [rad/s].
+    pub peak_pitch_rate_rad_s: Option<f64>,
+    /// Recovery time after the flip [s].
+    pub recovery_time_s: Option<f64>,
+    /// Lowest height from the ascent to the end of the hold [m].
+    pub min_flight_altitude_m: Option<f64>,
+    /// Vertical speed at touchdown [m/s].
+    pub touchdown_speed_m_s: Option<f64>,
+    /// Distance of the touchdown from the landing point [m].
+    pub landing_error_m: Option<f64>,
+    /// Delay from pose loss to return mode [s].
+    pub failsafe_delay_s: Option<f64>,
+    /// Solver time over the whole trial [us].
+    pub solver_time_us: TimeStats,
+    /// QP iterations per outer step, mean.
+    pub qp_iterations_mean: f64,
+    /// Fallbacks over the whole trial.
+    pub fallbacks: u32,
+    /// True mass [kg] (Monte Carlo draws differ).
+    pub mass_kg: f64,
+    /// True inertia diagonal [kg m^2].
+    pub inertia: [f64; 3],
+    /// True rotor time constant [s].
+    pub rotor_tau_s: f64,
+    /// Pose latency [s].
+    pub latency_s: f64,
+    /// Peak gust speed [m/s].
+    pub gust_m_s: f64,
+}
+
+fn pos(s: &Sample) -> Vector3<f64> {
+    Vector3::new(s.x, s.y, s.z)
+}
+
+fn pos_ref(s: &Sample) -> Vector3<f64> {
+    Vector3::new(s.x_ref, s.y_ref, s.z_ref)
+}
+
+fn phase_of(i: u8) -> Phase {
+    Phase::ALL
+        .get(usize::from(i))
+        .copied()
+        .unwrap_or(Phase::Landed)
+}
+
+fn summarize_phase(rows: &[Sample]) -> PhaseSummary {
+    let first = rows.first().copied().unwrap_or_default();
+    let last = rows.last().copied().unwrap_or_default();
+    let phase = phase_of(first.phase);
+    let errs: Vec<f64> = rows.iter().map(|s| (pos(s) - pos_ref(s)).norm()).collect();
+    let max_err = errs.iter().copied().fold(0.0, f64::max);
+    let rms = if errs.is_empty() {
+        0.0
+    } else {
+        (errs.iter().map(|e| e * e).sum::<f64>() / errs.len() as f64).sqrt()
+    };
+    let path: f64 = rows
+        .windows(2)
+        .map(|w| match w {
+            [a, b] => (pos_ref(b) - pos_ref(a)).norm(),
+            _ => 0.0,
+        })
+        .sum();
+    let min_alt = rows.iter().map(|s| s.z).fold(f64::INFINITY, f64::min);
+    let rate_rows: Vec<&Sample> = rows.iter().filter(|s| s.wy_ref != 0.0).collect();
+    let rate_pct = (!rate_rows.is_empty()).then(|| {
+        let m = rate_rows
+            .iter()
+            .map(|s| ((s.wy - s.wy_ref) / s.wy_ref).abs())
+            .sum::<f64>()
+            / rate_rows.len() as f64;
+        100.0 * m
+    });
+    PhaseSummary {
+        phase: phase.name().to_string(),
+        start_s: first.t,
+        duration_s: last.t - first.t,
+        max_tracking_error_m: max_err,
+        rms_tracking_error_m: rms,
+        tracking_error_pct: 100.0 * rms / path.max(1.0),
+        rate_tracking_error_pct: rate_pct,
+        recovery_time_s: None,
+        min_altitude_m: if min_alt.is_finite() { min_alt } else { 0.0 },
+        altitude_loss_m: (first.z - min_alt).max(0.0),
+        peak_pitch_rate_rad_s: rows.iter().map(|s| s.wy.abs()).fold(0.0, f64::max),
+        solver_time_us: TimeStats::of(rows.iter().map(|s| s.solver_us)),
+        fallbacks: rows.iter().filter(|s| s.fallback).count() as u32,
+    }
+}
+
+/// Recovery time: from `t0` (the flip's end) until the vehicle is within
+/// [`RECOVERY_TOL_M`] of `target` for good, judged on `rows` up to `until`.
+pub fn recovery_time(rows: &[Sample], target: &Vector3<f64>, t0: f64, until: f64) -> Option<f64> {
+    let window: Vec<&Sample> = rows.iter().filter(|s| s.t >= t0 && s.t <= until).collect();
+    let last = window.last()?;
+    if (pos(last) - target).norm() >= RECOVERY_TOL_M {
+        return None;
+    }
+    let last_out = window
+        .iter()
+        .rev()
+        .find(|s| (pos(s) - target).norm() >= RECOVERY_TOL_M)
+        .map_or(t0, |s| s.t);
+    Some(last_out - t0)
+}
+
+/// Summarizes one trial and judges it.
+pub fn summarize(res: &TrialResult) -> TrialSummary {
+    let cfg = &res.config;
+    let m = &cfg.mission;
+    let rows = &res.samples;
+    // Split the log into runs of one phase.
+    let mut phases = Vec::new();
+    let mut start = 0;
+    for i in 1..=rows.len() {
+        let boundary =
+            i == rows.len() || rows.get(i).map(|s| s.phase) != rows.get(start).map(|s| s.phase);
+        if boundary {
+            if let Some(run) = rows.get(start..i) {
+                phases.push(run);
+            }
+            start = i;
+        }
+    }
+    let find = |p: Phase| -> Option<&[Sample]> {
+        phases
+            .iter()
+            .find(|r| r.first().is_some_and(|s| s.phase == p.index()))
+            .copied()
+    };
+    let flip = find(Phase::Flip);
+    let recover = find(Phase::Recover);
+    let hold_after_flip = recover.and_then(|r| {
+        let end = r.last()?.t;
+        phases
+            .iter()
+            .find(|h| {
+                h.first()
+                    .is_some_and(|s| s.phase == Phase::Hold.index() && s.t >= end)
+            })
+            .copied()
+    });
+    let flip_end = recover.and_then(|r| r.first().map(|s| s.t));
+    let until = hold_after_flip
+        .and_then(|h| h.last().map(|s| s.t))
+        .or_else(|| recover.and_then(|r| r.last().map(|s| s.t)));
+    let recovery = match (flip_end, until) {
+        (Some(t0), Some(t1)) => recovery_time(rows, &m.rally_point, t0, t1),
+        _ => None,
+    };
+    let mut summaries: Vec<PhaseSummary> = phases.iter().map(|r| summarize_phase(r)).collect();
+    for s in &mut summaries {
+        if s.phase == Phase::Recover.name() {
+            s.recovery_time_s = recovery;
+        }
+    }
+    let flight_rows: Vec<&Sample> = rows
+        .iter()
+        .filter(|s| {
+            let p = phase_of(s.phase);
+            matches!(p, Phase::Ascend | Phase::Flip | Phase::Recover)
+                || (p == Phase::Hold && flip_end.is_some_and(|t| s.t >= t))
+        })
+        .collect();
+    let min_flight_alt = (!flight_rows.is_empty()).then(|| {
+        flight_rows
+            .iter()
+            .map(|s| s.z)
+            .fold(f64::INFINITY, f64::min)
+    });
+    let rotation = flip.map(|_| rows.iter().map(|s| s.pitch_turned).fold(0.0, f64::max));
+    let peak_rate = flip.map(|_| {
+        rows.iter()
+            .filter(|s| matches!(phase_of(s.phase), Phase::Flip | Phase::Recover))
+            .map(|s| s.wy.abs())
+            .fold(0.0, f64::max)
+    });
+    let landing_point = match m.kind {
+        MissionKind::Step => m.takeoff_point + m.step,
+        MissionKind::Flip | MissionKind::Hover => m.home,
+    };
+    let landing_error = res.touchdown.map(|td| {
+        let d = td.p - landing_point;
+        (d.x * d.x + d.y * d.y).sqrt()
+    });
+    let failsafe_delay = match (res.pose_lost_at, res.failsafe_at) {
+        (Some(a), Some(b)) => Some(b - a),
+        _ => None,
+    };
+    // Judge.
+    let mut failures = Vec::new();
+    match &res.outcome {
+        Outcome::Landed => {}
+        Outcome::Crashed(why) => failures.push(format!("crashed: {why}")),
+        Outcome::Timeout => failures.push("did not land before the time limit".to_string()),
+    }
+    if let Some(v) = res.touchdown.map(|t| t.vertical_speed) {
+        if v.abs() >= MAX_TOUCHDOWN_SPEED {
+            failures.push(format!(
+                "touchdown at {v:.2} m/s (limit {MAX_TOUCHDOWN_SPEED})"
+            ));
+        }
+    }
+    let landing_tol = if res.failsafe_at.is_some() {
+        0.5
+    } else {
+        LANDING_TOL_M
+    };
+    if let Some(e) = landing_error {
+        if e > landing_tol {
+            failures.push(format!(
+                "landed {e:.2} m from the landing point (limit {landing_tol})"
+            ));
+        }
+    }
+    if res.pose_lost_at.is_some() {
+        match failsafe_delay {
+            Some(d) if d <= FAILSAFE_DELAY_LIMIT_S => {}
+            Some(d) => failures.push(format!("return mode engaged {d:.3} s after the pose loss")),
+            None => failures.push("pose lost but return mode never engaged".to_string()),
+        }
+    } else if m.kind == MissionKind::Flip {
+        match rotation {
+            Some(r) if r >= 2.0 * PI * 0.98 => {}
+            Some(r) => failures.push(format!("flip turned only {:.0} deg", r.to_degrees())),
+            None => failures.push("the flip never started".to_string()),
+        }
+        if let Some(p) = peak_rate {
+            if p < MIN_RATE_FRACTION * m.flip_rate {
+                failures.push(format!(
+                    "peak pitch rate {p:.1} rad/s < {:.0} % of {:.1}",
+                    MIN_RATE_FRACTION * 100.0,
+                    m.flip_rate
+                ));
+            }
+        }
+        if let Some(z) = min_flight_alt {
+            if z < MIN_FLIGHT_ALTITUDE_M {
+                failures.push(format!("went down to {z:.2} m around the flip"));
+            }
+        }
+        match recovery {
+            Some(r) if r <= RECOVERY_LIMIT_S => {}
+            Some(r) => failures.push(format!("recovered only after {r:.2} s")),
+            None if flip.is_some() => failures.push(format!(
+                "not back within {RECOVERY_TOL_M} m of the rally point by the end of the hold"
+            )),
+            None => {}
+        }
+    }
+    let outer: Vec<&Sample> = rows.iter().filter(|s| s.solver_us.is_finite()).collect();
+    let qp_mean = if outer.is_empty() {
+        0.0
+    } else {
+        outer.iter().map(|s| s.qp_iterations).sum::<f64>() / outer.len() as f64
+    };
+    TrialSummary {
+        seed: cfg.seed,
+        success: failures.is_empty(),
+        failures,
+        outcome: match &res.outcome {
+            Outcome::Landed => "landed".to_string(),
+            Outcome::Crashed(w) => format!("crashed ({w})"),
+            Outcome::Timeout => "timeout".to_string(),
+        },
+        phases: summaries,
+        flip_rotation_rad: rotation,
+        peak_pitch_rate_rad_s: peak_rate,
+        recovery_time_s: recovery,
+        min_flight_altitude_m: min_flight_alt,
+        touchdown_speed_m_s: res.touchdown.map(|t| t.vertical_speed.abs()),
+        landing_error_m: landing_error,
+        failsafe_delay_s: failsafe_delay,
+        solver_time_us: TimeStats::of(rows.iter().map(|s| s.solver_us)),
+        qp_iterations_mean: qp_mean,
+        fallbacks: rows.iter().filter(|s| s.fallback).count() as u32,
+        mass_kg: cfg.plant.mass,
+        inertia: [
+            cfg.plant.inertia.x,
+            cfg.plant.inertia.y,
+            cfg.plant.inertia.z,
+        ],
+        rotor_tau_s: cfg.plant.rotor_tau,
+        latency_s: cfg.estimator.latency,
+        gust_m_s: cfg.gust.map_or(0.0, |g| g.peak.norm()),
+    }
+}
+
+/// Per-phase figures over several trials: the worst of each.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct PhaseAggregate {
+    /// Phase name.
+    pub phase: String,
+    /// Largest position error over the trials [m].
+    pub max_tracking_error_m: f64,
+    /// Largest relative RMS error [%].
+    pub tracking_error_pct: f64,
+    /// Largest relative pitch-rate error [%].
+    pub rate_tracking_error_pct: Option<f64>,
+    /// Longest recovery [s] (`None`: some trial never recovered, or no recovery phase).
+    pub recovery_time_s: Option<f64>,
+    /// Lowest height [m].
+    pub min_altitude_m: f64,
+    /// Largest altitude loss [m].
+    pub altitude_loss_m: f64,
+    /// Smallest peak pitch rate over the trials [rad/s] (the weakest flip).
+    pub peak_pitch_rate_rad_s: f64,
+    /// Solver time per step over all trials [us].
+    pub solver_time_us: TimeStats,
+    /// Fallbacks over all trials.
+    pub fallbacks: u32,
+}
+
+/// The summary of a run of one or more trials (the JSON of `mpcc sim --json`).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct RunSummary {
+    /// Mission name.
+    pub mission: String,
+    /// Controller name.
+    pub controller: String,
+    /// Whether every trial succeeded.
+    pub success: bool,
+    /// Trials flown.
+    pub trials: usize,
+    /// Trials that met every criterion.
+    pub successes: usize,
+    /// successes / trials.
+    pub success_rate: f64,
+    /// Per phase, worst over the trials.
+    pub phases: Vec<PhaseAggregate>,
+    /// Solver time per step over all trials [us].
+    pub solver_time_us: TimeStats,
+    /// Fallbacks over all trials.
+    pub fallbacks: u32,
+    /// The failed trials (all of them), then the worst successful ones by recovery time, at
+    /// most 5 in all.
+    pub worst: Vec<TrialSummary>,
+    /// The first trial in full.
+    pub first: Option<TrialSummary>,
+}
+
+/// Aggregates trial summaries.
+pub fn aggregate(mission: &str, controller: &str, trials: &[TrialSummary]) -> RunSummary {
+    let successes = trials.iter().filter(|t| t.success).count();
+    let mut order: Vec<String> = Vec::new();
+    for t in trials {
+        for p in &t.phases {
+            if !order.contains(&p.phase) {
+                order.push(p.phase.clone());
+            }
+        }
+    }
+    let phases = order
+        .iter()
+        .map(|name| {
+            let ps: Vec<&PhaseSummary> = trials
+                .iter()
+                .flat_map(|t| t.phases.iter().filter(|p| &p.phase == name))
+                .collect();
+            let rate: Vec<f64> = ps
+                .iter()
+                .filter_map(|p| p.rate_tracking_error_pct)
+                .collect();
+            let is_recover = name == Phase::Recover.name();
+            let rec: Vec<Option<f64>> = ps.iter().map(|p| p.recovery_time_s).collect();
+            PhaseAggregate {
+                phase: name.clone(),
+                max_tracking_error_m: ps
+                    .iter()
+                    .map(|p| p.max_tracking_error_m)
+                    .fold(0.0, f64::max),
+                tracking_error_pct: ps.iter().map(|p| p.tracking_error_pct).fold(0.0, f64::max),
+                rate_tracking_error_pct: (!rate.is_empty())
+                    .then(|| rate.iter().copied().fold(0.0, f64::max)),
+                recovery_time_s: if is_recover && rec.iter().all(Option::is_some) {
+                    rec.iter().flatten().copied().reduce(f64::max)
+                } else {
+                    None
+                },
+                min_altitude_m: ps
+                    .iter()
+                    .map(|p| p.min_altitude_m)
+                    .fold(f64::INFINITY, f64::min),
+                altitude_loss_m: ps.iter().map(|p| p.altitude_loss_m).fold(0.0, f64::max),
+                peak_pitch_rate_rad_s: ps
+                    .iter()
+                    .map(|p| p.peak_pitch_rate_rad_s)
+                    .fold(f64::INFINITY, f64::min),
+                solver_time_us: pooled(ps.iter().map(|p| p.solver_time_us)),
+                fallbacks: ps.iter().map(|p| p.fallbacks).sum(),
+            }
+        })
+        .collect();
+    let mut worst: Vec<TrialSummary> = trials.iter().filter(|t| !t.success).cloned().collect();
+    let mut ok: Vec<&TrialSummary> = trials.iter().filter(|t| t.success).collect();
+    ok.sort_by(|a, b| {
+        b.recovery_time_s
+            .unwrap_or_default()
+            .total_cmp(&a.recovery_time_s.unwrap_or_default())
+    });
+    for t in ok {
+        if worst.len() >= 5 {
+            break;
+        }
+        worst.push(t.clone());
+    }
+    RunSummary {
+        mission: mission.to_string(),
+        controller: controller.to_string(),
+        success: successes == trials.len() && !trials.is_empty(),
+        trials: trials.len(),
+        successes,
+        success_rate: if trials.is_empty() {
+            0.0
+        } else {
+            successes as f64 / trials.len() as f64
+        },
+        phases,
+        solver_time_us: pooled(trials.iter().map(|t| t.solver_time_us)),
+        fallbacks: trials.iter().map(|t| t.fallbacks).sum(),
+        worst,
+        first: trials.first().cloned(),
+    }
+}
+
+/// Pools statistics: mean weighted by count, p99 and max as the largest (an upper bound for
+/// the pooled p99).
+fn pooled(stats: impl IntoIterator<Item = TimeStats>) -> TimeStats {
+    let mut out = TimeStats::default();
+    let mut sum = 0.0;
+    for s in stats {
+        sum += s.mean * s.count as f64;
+        out.count += s.count;
+        out.p99 = out.p99.max(s.p99);
+        out.max = out.max.max(s.max);
+    }
+    if out.count > 0 {
+        out.mean = sum / out.count as f64;
+    }
+    out
+}
+
+fn opt(v: Option<f64>, digits: usize) -> String {
+    v.map_or_else(|| "-".to_string(), |x| format!("{x:.digits$}"))
+}
+
+/// The summary as the table the CLI prints.
+pub fn table(run: &RunSummary) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "mission {} · controller {} · {} of {} trials succeeded ({:.1} %)",
+        run.mission,
+        run.controller,
+        run.successes,
+        run.trials,
+        100.0 * run.success_rate
+    );
+    let _ = writeln!(
+        s,
+        "{:<9} {:>9} {:>7} {:>9} {:>9} {:>8} {:>9} {:>9} {:>9} {:>9} {:>9} {:>5}",
+        "phase",
+        "max err",
+        "err",
+        "rate err",
+        "recovery",
+        "min z",
+        "alt loss",
+        "peak wy",
+        "solver",
+        "p99",
+        "max",
+        "fall"
+    );
+    let _ = writeln!(
+        s,
+        "{:<9} {:>9} {:>7} {:>9} {:>9} {:>8} {:>9} {:>9} {:>9} {:>9} {:>9} {:>5}",
+        "", "m", "%", "%", "s", "m", "m", "rad/s", "mean us", "us", "us", "backs"
+    );
+    for p in &run.phases {
+        let _ = writeln!(
+            s,
+            "{:<9} {:>9.3} {:>7.1} {:>9} {:>9} {:>8.2} {:>9.2} {:>9.1} {:>9.1} {:>9.1} {:>9.1} {:>5}",
+            p.phase,
+            p.max_tracking_error_m,
+            p.tracking_error_pct,
+            opt(p.rate_tracking_error_pct, 1),
+            opt(p.recovery_time_s, 2),
+            p.min_altitude_m,
+            p.altitude_loss_m,
+            p.peak_pitch_rate_rad_s,
+            p.solver_time_us.mean,
+            p.solver_time_us.p99,
+            p.solver_time_us.max,
+            p.fallbacks
+        );
+    }
+    if let Some(f) = &run.first {
+        let _ = writeln!(
+            s,
+            "trial seed {}: {}; flip {} deg, peak pitch rate {} rad/s, recovered in {} s, \
+             lowest {} m around the flip, touchdown {} m/s, {} m from the landing point",
+            f.seed,
+            f.outcome,
+            opt(f.flip_rotation_rad.map(f64::to_degrees), 0),
+            opt(f.peak_pitch_rate_rad_s, 1),
+            opt(f.recovery_time_s, 2),
+            opt(f.min_flight_altitude_m, 2),
+            opt(f.touchdown_speed_m_s, 2),
+            opt(f.landing_error_m, 2)
+        );
+        if let Some(d) = f.failsafe_delay_s {
+            let _ = writeln!(s, "pose lost: return mode engaged after {d:.3} s");
+        }
+    }
+    for w in run.worst.iter().filter(|w| !w.success) {
+        let _ = writeln!(
+            s,
+            "FAILED seed {} (mass {:.2} kg, rotor tau {:.0} ms, latency {:.1} ms, gust {:.1} m/s): {}",
+            w.seed,
+            w.mass_kg,
+            w.rotor_tau_s * 1e3,
+            w.latency_s * 1e3,
+            w.gust_m_s,
+            w.failures.join("; ")
+        );
+    }
+    s
+}

@@ -1,0 +1,259 @@
+//! `mpcc sim`: fly a mission in the closed-loop simulator.
+
+use std::path::Path;
+use std::process::ExitCode;
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::Instant;
+
+use indicatif::{ProgressBar, ProgressStyle};
+use mpc_codegen::{Options, RuntimeDep};
+use mpc_sim::controller::ControllerKind;
+use mpc_sim::estimator::EstimatorConfig;
+use mpc_sim::mission::{MissionConfig, MissionKind, Phase};
+use mpc_sim::report::{self, TrialSummary};
+use mpc_sim::run::{SimConfig, TrialResult, run_trial};
+
+use crate::SimArgs;
+
+/// The generated solvers the simulator links, with the model each comes from.
+const SOLVERS: [(&str, &str, &str); 2] = [
+    (
+        "paper",
+        "models/paper_pointmass.mpc",
+        "generated/paper_pointmass",
+    ),
+    (
+        "nmpc",
+        "models/quadrotor_rates.mpc",
+        "generated/quadrotor_rates",
+    ),
+];
+
+/// Regenerates the controller's solver from its model and compares it with the crate the
+/// simulator is built with: a stale crate would fly another controller than the model says.
+fn check_solver(controller: &str, quiet: bool) -> Result<(), String> {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let Some((_, model, dir)) = SOLVERS.iter().find(|s| s.0 == controller) else {
+        return Ok(());
+    };
+    let opts = Options {
+        runtime: RuntimeDep::Path("../../runtime".into()),
+        ..Options::new()
+    };
+    let t = Instant::now();
+    let generated = mpc_codegen::generate_file(root.join(model), None, &opts)
+        .map_err(|e| format!("{model}: {e}"))?;
+    let stale = generated.check(&root.join(dir));
+    if !stale.is_empty() {
+        return Err(format!(
+            "{dir} is not what {model} generates ({stale:?} differ): regenerate it with \
+             `cargo run -- build {model} -o {dir}` and rebuild"
+        ));
+    }
+    if !quiet {
+        eprintln!(
+            "solver: generated {dir} from {model} in {:.0} ms (identical to the crate linked)",
+            t.elapsed().as_secs_f64() * 1e3
+        );
+    }
+    Ok(())
+}
+
+fn parse(args: &SimArgs) -> Result<(MissionKind, ControllerKind), String> {
+    let mission = match args.mission.as_str() {
+        "flip" => MissionKind::Flip,
+        "hover" => MissionKind::Hover,
+        "step" => MissionKind::Step,
+        "flip-throw" => {
+            return Err(
+                "--mission flip-throw: not available yet (the probe and the release \
+                        planner are the next step); fly --mission flip, hover or step"
+                    .to_string(),
+            );
+        }
+        m => return Err(format!("--mission {m}: unknown; use flip, hover or step")),
+    };
+    let controller = match args.controller.as_str() {
+        "paper" => ControllerKind::Paper,
+        "nmpc" => ControllerKind::Nmpc,
+        c => return Err(format!("--controller {c}: unknown; use paper or nmpc")),
+    };
+    if args.trials == 0 {
+        return Err("--trials 0: fly at least one trial".to_string());
+    }
+    if let Some(s) = args.pose_loss {
+        if !(s.is_finite() && s >= 0.0) {
+            return Err(format!(
+                "--pose-loss {s}: give the seconds after the flip's start (>= 0)"
+            ));
+        }
+        if mission != MissionKind::Flip {
+            return Err("--pose-loss is a flip-mission scenario".to_string());
+        }
+    }
+    Ok((mission, controller))
+}
+
+/// The time of the flip's start in a nominal run, for `--pose-loss`: found by flying the
+/// mission once without the loss (deterministic).
+fn flip_start(cfg: &SimConfig) -> Option<f64> {
+    let res = run_trial(cfg);
+    res.transitions
+        .iter()
+        .find(|t| t.phase == Phase::Flip)
+        .map(|t| t.t)
+}
+
+pub(crate) fn run(args: &SimArgs) -> ExitCode {
+    let (mission, controller) = match parse(args) {
+        Ok(v) => v,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    if let Err(e) = check_solver(controller.name(), args.json) {
+        eprintln!("error: {e}");
+        return ExitCode::FAILURE;
+    }
+    let mut base = SimConfig::new(MissionConfig::for_kind(mission), controller);
+    base.seed = args.seed;
+    if args.perfect_sensing {
+        base.estimator = EstimatorConfig::perfect();
+    }
+    if let Some(after) = args.pose_loss {
+        match flip_start(&base) {
+            Some(t) => base = base.with_pose_loss_in_flip(t + after),
+            None => {
+                eprintln!("error: --pose-loss: the nominal run never reached the flip");
+                return ExitCode::FAILURE;
+            }
+        }
+    }
+    let configs: Vec<SimConfig> = (0..args.trials)
+        .map(|i| {
+            let seed = args.seed.wrapping_add(i as u64);
+            if args.randomize {
+                base.randomized(seed)
+            } else {
+                SimConfig {
+                    seed,
+                    ..base.clone()
+                }
+            }
+        })
+        .collect();
+    let started = Instant::now();
+    let bar = if args.trials > 1 && !args.json {
+        let b = ProgressBar::new(args.trials as u64);
+        if let Ok(style) = ProgressStyle::with_template(
+            "{bar:40} {pos}/{len} trials, {elapsed} elapsed, eta {eta}",
+        ) {
+            b.set_style(style);
+        }
+        b
+    } else {
+        ProgressBar::hidden()
+    };
+    let (summaries, first) = fly_all(&configs, &bar);
+    bar.finish_and_clear();
+    let run = report::aggregate(&args.mission, controller.name(), &summaries);
+    if args.json {
+        match serde_json::to_string(&run) {
+            Ok(s) => println!("{s}"),
+            Err(e) => {
+                eprintln!("error: JSON: {e}");
+                return ExitCode::FAILURE;
+            }
+        }
+    } else {
+        print!("{}", report::table(&run));
+        println!(
+            "{} trial(s) in {:.1} s wall-clock",
+            args.trials,
+            started.elapsed().as_secs_f64()
+        );
+    }
+    if !args.no_plots {
+        if let Some(first) = &first {
+            if let Err(e) = write_outputs(&args.out, first, &run.mission, args.json) {
+                eprintln!("error: {e}");
+                return ExitCode::FAILURE;
+            }
+        }
+    }
+    if run.success {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::FAILURE
+    }
+}
+
+/// Flies every configuration on all cores; returns the summaries in order and the first
+/// trial's full result (for the log and plots).
+fn fly_all(configs: &[SimConfig], bar: &ProgressBar) -> (Vec<TrialSummary>, Option<TrialResult>) {
+    let next = AtomicUsize::new(0);
+    let out: Mutex<Vec<Option<TrialSummary>>> = Mutex::new(vec![None; configs.len()]);
+    let first: Mutex<Option<TrialResult>> = Mutex::new(None);
+    let workers = std::thread::available_parallelism()
+        .map_or(1, usize::from)
+        .min(configs.len())
+        .max(1);
+    std::thread::scope(|s| {
+        for _ in 0..workers {
+            s.spawn(|| {
+                loop {
+                    let i = next.fetch_add(1, Ordering::Relaxed);
+                    let Some(cfg) = configs.get(i) else { break };
+                    let res = run_trial(cfg);
+                    let summary = report::summarize(&res);
+                    if let Ok(mut o) = out.lock() {
+                        if let Some(slot) = o.get_mut(i) {
+                            *slot = Some(summary);
+                        }
+                    }
+                    if i == 0 {
+                        if let Ok(mut f) = first.lock() {
+                            *f = Some(res);
+                        }
+                    }
+                    bar.inc(1);
+                }
+            });
+        }
+    });
+    let summaries = out
+        .into_inner()
+        .unwrap_or_default()
+        .into_iter()
+        .flatten()
+        .collect();
+    (summaries, first.into_inner().unwrap_or_default())
+}
+
+fn write_outputs(dir: &Path, res: &TrialResult, mission: &str, quiet: bool) -> Result<(), String> {
+    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let csv = dir.join(format!("{mission}.csv"));
+    mpc_sim::plot::write_csv(&csv, &res.samples).map_err(|e| e.to_string())?;
+    let title = format!(
+        "{mission} · {} controller · seed {}",
+        res.config.controller.name(),
+        res.config.seed
+    );
+    let names = Phase::names();
+    let plots =
+        mpc_sim::plot::write_plots(dir, &format!("{mission}_"), &title, &res.samples, &names)
+            .map_err(|e| e.to_string())?;
+    if !quiet {
+        println!(
+            "wrote {}, {}, {}, {}, {}",
+            csv.display(),
+            plots.position.display(),
+            plots.rates.display(),
+            plots.thrust.display(),
+            plots.solver_time.display()
+        );
+    }
+    Ok(())
+}
