@@ -175,13 +175,12 @@ pub(crate) fn run(args: &SimArgs) -> ExitCode {
             started.elapsed().as_secs_f64()
         );
     }
-    if !args.no_plots {
-        if let Some(first) = &first {
-            if let Err(e) = write_outputs(&args.out, first, &run.mission, args.json) {
-                eprintln!("error: {e}");
-                return ExitCode::FAILURE;
-            }
-        }
+    if !args.no_plots
+        && let Some(first) = &first
+        && let Err(e) = write_outputs(&args.out, first, &run.mission, args.json)
+    {
+        eprintln!("error: {e}");
+        return ExitCode::FAILURE;
     }
     if run.success {
         ExitCode::SUCCESS
@@ -208,15 +207,15 @@ fn fly_all(configs: &[SimConfig], bar: &ProgressBar) -> (Vec<TrialSummary>, Opti
                     let Some(cfg) = configs.get(i) else { break };
                     let res = run_trial(cfg);
                     let summary = report::summarize(&res);
-                    if let Ok(mut o) = out.lock() {
-                        if let Some(slot) = o.get_mut(i) {
-                            *slot = Some(summary);
-                        }
+                    if let Ok(mut o) = out.lock()
+                        && let Some(slot) = o.get_mut(i)
+                    {
+                        *slot = Some(summary);
                     }
-                    if i == 0 {
-                        if let Ok(mut f) = first.lock() {
-                            *f = Some(res);
-                        }
+                    if i == 0
+                        && let Ok(mut f) = first.lock()
+                    {
+                        *f = Some(res);
                     }
                     bar.inc(1);
                 }

@@ -142,6 +142,33 @@ pub fn attitude_rates(q: &UnitQuaternion<f64>, qd: &UnitQuaternion<f64>, tau: f6
     -e * (2.0 / tau)
 }
 
+/// Weights of the paper's point-mass MPC (diagonals of Q, P and R).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PointMassWeights {
+    /// Q on (position, velocity, acceleration).
+    pub q: [f64; 9],
+    /// P (terminal) on (position, velocity, acceleration).
+    pub p: [f64; 9],
+    /// R on the jerk change.
+    pub r: [f64; 3],
+}
+
+impl PointMassWeights {
+    /// The paper's values (the model's defaults).
+    pub const PAPER: Self = Self {
+        q: [50.0, 10.0, 20.0, 10.0, 20.0, 10.0, 10.0, 10.0, 10.0],
+        p: [100.0, 100.0, 10.0, 10.0, 10.0, 10.0, 10.0, 10.0, 10.0],
+        r: [1.0, 1.0, 1.0],
+    };
+    /// Ours, for the simulator: the paper's shape with position and velocity weighed up
+    /// against acceleration, so the loop closes in well under a second.
+    pub const TUNED: Self = Self {
+        q: [2000.0, 2000.0, 2000.0, 200.0, 200.0, 200.0, 2.0, 2.0, 2.0],
+        p: [4000.0, 4000.0, 4000.0, 400.0, 400.0, 400.0, 4.0, 4.0, 4.0],
+        r: [0.01, 0.01, 0.01],
+    };
+}
+
 /// The paper's architecture.
 pub struct PaperController {
     solver: Box<paper_pointmass::Solver>,
@@ -156,10 +183,18 @@ pub struct PaperController {
 }
 
 impl PaperController {
-    /// A controller with the generated defaults, tau = 0.12 s.
+    /// A controller with [`PointMassWeights::TUNED`], tau = 0.12 s.
     pub fn new() -> Self {
+        Self::with_weights(PointMassWeights::TUNED)
+    }
+
+    /// A controller with the given MPC weights.
+    pub fn with_weights(w: PointMassWeights) -> Self {
         let mut solver = Box::new(paper_pointmass::Solver::new());
         solver.settings_mut().shift = true;
+        let _ = solver.set_q_w(&w.q);
+        let _ = solver.set_p_w(&w.p);
+        let _ = solver.set_r_w(&w.r);
         Self {
             solver,
             tau: 0.12,

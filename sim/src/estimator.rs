@@ -35,6 +35,10 @@ pub struct EstimatorConfig {
     /// Dead-reckoning drift while the pose is lost: random-walk intensity of the velocity
     /// error [m/s per sqrt(s)] (the position error is its integral).
     pub drift: f64,
+    /// Correlation time of the pose noise [s]: the flight controller's filter smooths the
+    /// motion-capture samples, so the error is coloured (first-order Gauss-Markov with the
+    /// standard deviations above), not white at the simulation rate. 0: white.
+    pub noise_correlation: f64,
 }
 
 impl EstimatorConfig {
@@ -48,11 +52,12 @@ impl EstimatorConfig {
             gyro_noise: 0.0,
             dropouts: Vec::new(),
             drift: 0.0,
+            noise_correlation: 0.0,
         }
     }
 
-    /// Motion-capture-like noise: 5 mm position, 0.02 m/s velocity, 0.005 rad attitude,
-    /// 0.02 rad/s gyro, 5 ms latency.
+    /// Motion-capture-like noise: 5 mm position, 0.02 m/s velocity, 0.005 rad attitude
+    /// (correlated over 20 ms), 0.02 rad/s gyro (white), 5 ms latency.
     pub fn noisy() -> Self {
         Self {
             latency: 0.005,
@@ -61,7 +66,8 @@ impl EstimatorConfig {
             att_noise: 0.005,
             gyro_noise: 0.02,
             dropouts: Vec::new(),
-            drift: 0.05,
+            drift: 0.01,
+            noise_correlation: 0.02,
         }
     }
 
@@ -103,6 +109,8 @@ pub struct Estimator {
     drift_v: Vector3<f64>,
     drift_p: Vector3<f64>,
     last_t: Option<f64>,
+    /// Coloured pose noise: position, velocity, attitude.
+    colored: [Vector3<f64>; 3],
 }
 
 fn clean_std(std: f64) -> f64 {
@@ -124,6 +132,7 @@ impl Estimator {
             drift_v: Vector3::zeros(),
             drift_p: Vector3::zeros(),
             last_t: None,
+            colored: [Vector3::zeros(); 3],
         }
     }
 
@@ -165,9 +174,25 @@ impl Estimator {
             self.drift_v = Vector3::zeros();
             self.drift_p = Vector3::zeros();
         }
-        let p = delayed.p + self.vec_noise(self.cfg.pos_noise) + self.drift_p;
-        let v = delayed.v + self.vec_noise(self.cfg.vel_noise) + self.drift_v;
-        let dq = UnitQuaternion::from_scaled_axis(self.vec_noise(self.cfg.att_noise));
+        // First-order Gauss-Markov: x+ = a x + sqrt(1 - a^2) sigma n keeps the variance.
+        let tc = self.cfg.noise_correlation;
+        let a = if tc > 0.0 && dt > 0.0 {
+            (-dt / tc).exp()
+        } else {
+            0.0
+        };
+        let b = (1.0 - a * a).sqrt();
+        let stds = [self.cfg.pos_noise, self.cfg.vel_noise, self.cfg.att_noise];
+        for (i, std) in stds.into_iter().enumerate() {
+            let n = self.vec_noise(std);
+            if let Some(c) = self.colored.get_mut(i) {
+                *c = *c * a + n * b;
+            }
+        }
+        let [np, nv, na] = self.colored;
+        let p = delayed.p + np + self.drift_p;
+        let v = delayed.v + nv + self.drift_v;
+        let dq = UnitQuaternion::from_scaled_axis(na);
         let q = delayed.q * dq;
         let w = truth.w + self.vec_noise(self.cfg.gyro_noise);
         Estimate {

@@ -314,7 +314,11 @@ pub enum Segment {
     },
 }
 
-fn quintic_1d(p0: f64, v0: f64, a0: f64, p1: f64, v1: f64, a1: f64, t: f64, tt: f64) -> [f64; 3] {
+/// One axis of a quintic: `start` and `end` are (position, velocity, acceleration), `t` the
+/// time into it, `tt` its duration.
+fn quintic_1d(start: [f64; 3], end: [f64; 3], t: f64, tt: f64) -> [f64; 3] {
+    let [p0, v0, a0] = start;
+    let [p1, v1, a1] = end;
     if tt <= 0.0 {
         return [p1, v1, a1];
     }
@@ -360,12 +364,8 @@ fn eval_segment(
             let mut out = [Vector3::zeros(); 3];
             for i in 0..3 {
                 let r = quintic_1d(
-                    start[0][i],
-                    start[1][i],
-                    start[2][i],
-                    end[0][i],
-                    end[1][i],
-                    end[2][i],
+                    [start[0][i], start[1][i], start[2][i]],
+                    [end[0][i], end[1][i], end[2][i]],
                     tau,
                     duration,
                 );

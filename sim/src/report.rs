@@ -312,24 +312,24 @@ pub fn summarize(res: &TrialResult) -> TrialSummary {
         Outcome::Crashed(why) => failures.push(format!("crashed: {why}")),
         Outcome::Timeout => failures.push("did not land before the time limit".to_string()),
     }
-    if let Some(v) = res.touchdown.map(|t| t.vertical_speed) {
-        if v.abs() >= MAX_TOUCHDOWN_SPEED {
-            failures.push(format!(
-                "touchdown at {v:.2} m/s (limit {MAX_TOUCHDOWN_SPEED})"
-            ));
-        }
+    if let Some(v) = res.touchdown.map(|t| t.vertical_speed)
+        && v.abs() >= MAX_TOUCHDOWN_SPEED
+    {
+        failures.push(format!(
+            "touchdown at {v:.2} m/s (limit {MAX_TOUCHDOWN_SPEED})"
+        ));
     }
     let landing_tol = if res.failsafe_at.is_some() {
         0.5
     } else {
         LANDING_TOL_M
     };
-    if let Some(e) = landing_error {
-        if e > landing_tol {
-            failures.push(format!(
-                "landed {e:.2} m from the landing point (limit {landing_tol})"
-            ));
-        }
+    if let Some(e) = landing_error
+        && e > landing_tol
+    {
+        failures.push(format!(
+            "landed {e:.2} m from the landing point (limit {landing_tol})"
+        ));
     }
     if res.pose_lost_at.is_some() {
         match failsafe_delay {
@@ -339,23 +339,23 @@ pub fn summarize(res: &TrialResult) -> TrialSummary {
         }
     } else if m.kind == MissionKind::Flip {
         match rotation {
-            Some(r) if r >= 2.0 * PI * 0.98 => {}
+            Some(r) if r >= 2.0 * PI => {}
             Some(r) => failures.push(format!("flip turned only {:.0} deg", r.to_degrees())),
             None => failures.push("the flip never started".to_string()),
         }
-        if let Some(p) = peak_rate {
-            if p < MIN_RATE_FRACTION * m.flip_rate {
-                failures.push(format!(
-                    "peak pitch rate {p:.1} rad/s < {:.0} % of {:.1}",
-                    MIN_RATE_FRACTION * 100.0,
-                    m.flip_rate
-                ));
-            }
+        if let Some(p) = peak_rate
+            && p < MIN_RATE_FRACTION * m.flip_rate
+        {
+            failures.push(format!(
+                "peak pitch rate {p:.1} rad/s < {:.0} % of {:.1}",
+                MIN_RATE_FRACTION * 100.0,
+                m.flip_rate
+            ));
         }
-        if let Some(z) = min_flight_alt {
-            if z < MIN_FLIGHT_ALTITUDE_M {
-                failures.push(format!("went down to {z:.2} m around the flip"));
-            }
+        if let Some(z) = min_flight_alt
+            && z < MIN_FLIGHT_ALTITUDE_M
+        {
+            failures.push(format!("went down to {z:.2} m around the flip"));
         }
         match recovery {
             Some(r) if r <= RECOVERY_LIMIT_S => {}
