@@ -129,19 +129,27 @@ fn paper_pointmass_builder(g: &Graph) -> Ocp<'_> {
     let u_prev = b.global_param(
         Decl::vector("u_prev", 3).describe("jerk applied at the previous control step (u_{-1})"),
     );
+    let q_w = b.global_param(
+        Decl::vector("q_w", 9)
+            .describe("diagonal of Q (default: the paper's)")
+            .start(&[50.0, 10.0, 20.0, 10.0, 20.0, 10.0, 10.0, 10.0, 10.0]),
+    );
+    let p_w = b.global_param(
+        Decl::vector("p_w", 9)
+            .describe("diagonal of P (default: the paper's)")
+            .start(&[100.0, 100.0, 10.0, 10.0, 10.0, 10.0, 10.0, 10.0, 10.0]),
+    );
+    let r_w = b.global_param(
+        Decl::vector("r_w", 3)
+            .describe("diagonal of R on the jerk change (default: identity)")
+            .start(&[1.0]),
+    );
     let xdot: Vec<Expr<'_>> = vel.iter().chain(&acc).chain(&jerk).copied().collect();
     b.ode(&xdot, Integrator::Rk4 { steps: 1 });
     b.horizon(10, 0.04);
-    let diag = |d: &[f64]| Matrix::diag(g, &Vector::constants(g, d));
-    b.state_cost(
-        diag(&[50.0, 10.0, 20.0, 10.0, 20.0, 10.0, 10.0, 10.0, 10.0]),
-        &xref,
-    );
-    b.terminal_cost(
-        diag(&[100.0, 100.0, 10.0, 10.0, 10.0, 10.0, 10.0, 10.0, 10.0]),
-        &xref,
-    );
-    b.input_rate(Matrix::identity(g, 3), &u_prev);
+    b.state_cost(Matrix::diag(g, &q_w), &xref);
+    b.terminal_cost(Matrix::diag(g, &p_w), &xref);
+    b.input_rate(Matrix::diag(g, &r_w), &u_prev);
     b.bound(&jerk, -50.0, 50.0);
     b.bound(&acc, -20.0, 20.0);
     b.build().unwrap()
@@ -201,7 +209,7 @@ fn paper_pointmass_file_equals_builder() {
     let parsed = parse_ok(&g, PM, None);
     let built = paper_pointmass_builder(&g);
     assert_eq!(parsed, built);
-    assert_eq!((parsed.nx(), parsed.nu(), parsed.np()), (9, 3, 12));
+    assert_eq!((parsed.nx(), parsed.nu(), parsed.np()), (9, 3, 33));
     assert_eq!((parsed.horizon.n, parsed.horizon.dt), (10, 0.04));
     assert!(parsed.cost.input_rate.is_some());
     assert!(parsed.cost.control.is_none());
