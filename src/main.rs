@@ -58,6 +58,9 @@ struct SimArgs {
     /// No estimation noise or latency (the true state).
     #[arg(long)]
     perfect_sensing: bool,
+    /// True vehicle mass [kg] (the controllers keep believing the nominal 1 kg).
+    #[arg(long, value_name = "KG")]
+    mass: Option<f64>,
     /// The paper's trial 9: lose the pose at this many seconds into the flip, for good.
     #[arg(long, value_name = "SECONDS")]
     pose_loss: Option<f64>,

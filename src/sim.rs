@@ -82,6 +82,11 @@ fn parse(args: &SimArgs) -> Result<(MissionKind, ControllerKind), String> {
     if args.trials == 0 {
         return Err("--trials 0: fly at least one trial".to_string());
     }
+    if let Some(m) = args.mass
+        && !(m.is_finite() && m > 0.0)
+    {
+        return Err(format!("--mass {m}: give the vehicle's mass in kg (> 0)"));
+    }
     if let Some(s) = args.pose_loss {
         if !(s.is_finite() && s >= 0.0) {
             return Err(format!(
@@ -119,6 +124,9 @@ pub(crate) fn run(args: &SimArgs) -> ExitCode {
     }
     let mut base = SimConfig::new(MissionConfig::for_kind(mission), controller);
     base.seed = args.seed;
+    if let Some(m) = args.mass {
+        base.plant.mass = m;
+    }
     if args.perfect_sensing {
         base.estimator = EstimatorConfig::perfect();
     }

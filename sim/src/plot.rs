@@ -498,24 +498,36 @@ fn draw_figure(
     panels: &[PanelSpec],
     phases: &PhaseMarks,
 ) -> DrawResult<()> {
-    let root = BitMapBackend::new(path, (WIDTH, HEIGHT)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let body = root.margin(8, 4, 0, 0).titled(caption, (FONT, 26))?;
-    let areas = body.split_evenly((panels.len().max(1), 1));
-    let (t0, t1) = padded(finite_range(samples.iter().map(|s| s.t)), 0.0);
-    for (i, (panel, area)) in panels.iter().zip(&areas).enumerate() {
-        draw_panel(
-            &root,
-            area,
-            panel,
-            samples,
-            (t0, t1),
-            phases,
-            i == 0,
-            i + 1 == panels.len(),
-        )?;
+    // Drawn into an RGB buffer and encoded with the `png` crate (plotters' own encoder
+    // would pull in the whole `image` crate).
+    let mut rgb = vec![0u8; WIDTH as usize * HEIGHT as usize * 3];
+    {
+        let root = BitMapBackend::with_buffer(&mut rgb, (WIDTH, HEIGHT)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let body = root.margin(8, 4, 0, 0).titled(caption, (FONT, 26))?;
+        let areas = body.split_evenly((panels.len().max(1), 1));
+        let (t0, t1) = padded(finite_range(samples.iter().map(|s| s.t)), 0.0);
+        for (i, (panel, area)) in panels.iter().zip(&areas).enumerate() {
+            draw_panel(
+                &root,
+                area,
+                panel,
+                samples,
+                (t0, t1),
+                phases,
+                i == 0,
+                i + 1 == panels.len(),
+            )?;
+        }
+        root.present()?;
     }
-    root.present()?;
+    let file = std::io::BufWriter::new(std::fs::File::create(path)?);
+    let mut enc = png::Encoder::new(file, WIDTH, HEIGHT);
+    enc.set_color(png::ColorType::Rgb);
+    enc.set_depth(png::BitDepth::Eight);
+    let mut writer = enc.write_header()?;
+    writer.write_image_data(&rgb)?;
+    writer.finish()?;
     Ok(())
 }
 

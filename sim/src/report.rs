@@ -614,16 +614,21 @@ pub fn table(run: &RunSummary) -> String {
         );
     }
     if let Some(f) = &run.first {
+        let mut line = format!("trial seed {}: {}", f.seed, f.outcome);
+        if let Some(r) = f.flip_rotation_rad {
+            let _ = write!(
+                line,
+                "; flip {:.0} deg, peak pitch rate {} rad/s, recovered in {} s, lowest {} m \
+                 around the flip",
+                r.to_degrees(),
+                opt(f.peak_pitch_rate_rad_s, 1),
+                opt(f.recovery_time_s, 2),
+                opt(f.min_flight_altitude_m, 2)
+            );
+        }
         let _ = writeln!(
             s,
-            "trial seed {}: {}; flip {} deg, peak pitch rate {} rad/s, recovered in {} s, \
-             lowest {} m around the flip, touchdown {} m/s, {} m from the landing point",
-            f.seed,
-            f.outcome,
-            opt(f.flip_rotation_rad.map(f64::to_degrees), 0),
-            opt(f.peak_pitch_rate_rad_s, 1),
-            opt(f.recovery_time_s, 2),
-            opt(f.min_flight_altitude_m, 2),
+            "{line}; touchdown {} m/s, {} m from the landing point",
             opt(f.touchdown_speed_m_s, 2),
             opt(f.landing_error_m, 2)
         );

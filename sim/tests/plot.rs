@@ -265,14 +265,31 @@ fn png_size(bytes: &[u8]) -> (u32, u32) {
 
 /// Size of a blank white PNG of the figure size, encoded the same way.
 fn blank_png_len(dir: &Path) -> usize {
-    use plotters::prelude::*;
     let path = dir.join("blank.png");
-    {
-        let root = BitMapBackend::new(&path, (WIDTH, HEIGHT)).into_drawing_area();
-        root.fill(&WHITE).unwrap();
-        root.present().unwrap();
-    }
+    let white = vec![255u8; WIDTH as usize * HEIGHT as usize * 3];
+    let file = std::io::BufWriter::new(std::fs::File::create(&path).unwrap());
+    let mut enc = png::Encoder::new(file, WIDTH, HEIGHT);
+    enc.set_color(png::ColorType::Rgb);
+    enc.set_depth(png::BitDepth::Eight);
+    let mut w = enc.write_header().unwrap();
+    w.write_image_data(&white).unwrap();
+    w.finish().unwrap();
     std::fs::read(&path).unwrap().len()
+}
+
+/// Decodes a PNG and returns the share of pixels that are not white, and whether some are
+/// red-dominant and some blue-dominant (the reference and the true curves).
+fn ink(bytes: &[u8]) -> (f64, bool, bool) {
+    let dec = png::Decoder::new(std::io::Cursor::new(bytes));
+    let mut reader = dec.read_info().unwrap();
+    let mut buf = vec![0; reader.output_buffer_size()];
+    let info = reader.next_frame(&mut buf).unwrap();
+    assert_eq!(info.color_type, png::ColorType::Rgb);
+    let px: Vec<&[u8]> = buf[..info.buffer_size()].chunks(3).collect();
+    let inked = px.iter().filter(|p| p.iter().any(|&c| c < 250)).count();
+    let red = px.iter().any(|p| p[0] > 150 && p[1] < 100 && p[2] < 100);
+    let blue = px.iter().any(|p| p[2] > 150 && p[0] < 100);
+    (inked as f64 / px.len() as f64, red, blue)
 }
 
 #[test]
@@ -293,6 +310,9 @@ fn plots_are_written_as_non_blank_pngs() {
         let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
         assert_eq!(png_size(&bytes), (WIDTH, HEIGHT), "{}", path.display());
         assert!((1000..=1400).contains(&WIDTH) && (800..=1000).contains(&HEIGHT));
+        let (share, red, blue) = ink(&bytes);
+        assert!(share > 0.02, "{}: only {share} of the pixels drawn", path.display());
+        assert!(red && blue, "{}: no red or no blue curve", path.display());
         assert!(
             bytes.len() > 20_000 && bytes.len() > 4 * blank,
             "{} looks blank: {} bytes (blank image: {blank} bytes)",

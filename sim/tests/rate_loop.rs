@@ -329,23 +329,3 @@ fn integrator_is_limited_and_reset() {
     );
     assert!(o.rotor_cmd.iter().all(|x| x.is_finite()));
 }
-
-/// Prints the step metrics for a grid of gains (tuning aid).
-#[test]
-#[ignore]
-fn tune_print() {
-    for (js, ts) in [(1.0, 1.0), (1.3, 1.0), (0.7, 1.0), (1.0, 1.5), (1.3, 1.5)] {
-        let truth = QuadParams {
-            inertia: QuadParams::default().inertia * js,
-            rotor_tau: 0.03 * ts,
-            ..QuadParams::default()
-        };
-        for hz in [1000.0, 250.0] {
-            for th in [9.81, 0.3 * 9.81] {
-                let tr = pitch_step_on(&truth, RateGains::default(), FLIP_RATE, th, hz, 0.5);
-                let (t90, os, dev) = metrics(&tr, FLIP_RATE);
-                println!("J*{js} tau*{ts} {hz} Hz T {th:.2}: t90 {t90:.3} os {os:.3} dev {dev:.3}");
-            }
-        }
-    }
-}

@@ -1,0 +1,140 @@
+//! `mpcc sim`: the README's main command, its JSON summary, its files and its errors.
+
+use std::path::Path;
+use std::process::Command;
+
+fn mpcc(args: &[&str]) -> (Option<i32>, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_mpcc"))
+        .args(args)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .expect("the mpcc binary runs");
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+fn num(v: &serde_json::Value, key: &str) -> f64 {
+    v.get(key)
+        .and_then(serde_json::Value::as_f64)
+        .unwrap_or_else(|| panic!("{key} missing or not a number in {v}"))
+}
+
+#[test]
+fn default_run_flies_the_flip_and_writes_log_and_plots() {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("cli_sim_default");
+    let _ = std::fs::remove_dir_all(&dir);
+    let (code, out, err) = mpcc(&["sim", "--out", dir.to_str().unwrap()]);
+    assert_eq!(code, Some(0), "{out}\n{err}");
+    assert!(out.contains("mission flip"), "{out}");
+    assert!(out.contains("1 of 1 trials succeeded"), "{out}");
+    for phase in [
+        "takeoff", "rally", "ascend", "flip", "recover", "hold", "return", "land",
+    ] {
+        assert!(
+            out.lines().any(|l| l.starts_with(phase)),
+            "no {phase} row in\n{out}"
+        );
+    }
+    assert!(err.contains("identical to the crate linked"), "{err}");
+    let csv = std::fs::read_to_string(dir.join("flip.csv")).unwrap();
+    let mut lines = csv.lines();
+    let header = lines.next().unwrap();
+    assert!(
+        header.starts_with("t,phase,failsafe,pose_valid,x,y,z,"),
+        "{header}"
+    );
+    assert!(lines.count() > 10_000, "a 1 kHz log of a ~20 s mission");
+    for f in ["position", "rates", "thrust", "solver_time"] {
+        let png = std::fs::read(dir.join(format!("flip_{f}.png"))).unwrap();
+        assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n", "{f}");
+        assert!(png.len() > 20_000, "{f}.png is nearly empty");
+    }
+}
+
+#[test]
+fn json_summary_has_the_documented_fields() {
+    let (code, out, err) = mpcc(&[
+        "sim",
+        "--controller",
+        "nmpc",
+        "--trials",
+        "2",
+        "--seed",
+        "5",
+        "--json",
+        "--no-plots",
+    ]);
+    assert_eq!(code, Some(0), "{err}");
+    let v: serde_json::Value = serde_json::from_str(out.trim()).expect("one JSON object");
+    assert_eq!(v["success"], serde_json::Value::Bool(true));
+    assert_eq!(num(&v, "trials"), 2.0);
+    assert_eq!(num(&v, "successes"), 2.0);
+    assert_eq!(v["controller"], "nmpc");
+    let phases = v["phases"].as_array().unwrap();
+    let flip = phases.iter().find(|p| p["phase"] == "flip").unwrap();
+    assert!(num(flip, "peak_pitch_rate_rad_s") >= 0.9 * 5.0 * std::f64::consts::PI);
+    let recover = phases.iter().find(|p| p["phase"] == "recover").unwrap();
+    assert!(num(recover, "recovery_time_s") <= 3.0);
+    for p in phases {
+        for key in [
+            "max_tracking_error_m",
+            "min_altitude_m",
+            "peak_pitch_rate_rad_s",
+        ] {
+            assert!(num(p, key).is_finite(), "{key} in {p}");
+        }
+        let st = &p["solver_time_us"];
+        if p["phase"] != "landed" {
+            assert!(num(st, "mean") > 0.0 && num(st, "p99") >= num(st, "mean") * 0.5);
+            assert!(num(st, "max") >= num(st, "p99"));
+        }
+    }
+    assert_eq!(v["first"]["seed"], 5);
+}
+
+#[test]
+fn pose_loss_scenario_reports_return_mode() {
+    let (code, out, err) = mpcc(&["sim", "--pose-loss", "0.2", "--no-plots"]);
+    assert_eq!(code, Some(0), "{out}\n{err}");
+    assert!(out.contains("return mode engaged after"), "{out}");
+}
+
+#[test]
+fn bad_arguments_are_refused_with_a_reason() {
+    for (args, want) in [
+        (vec!["sim", "--mission", "loop"], "--mission loop: unknown"),
+        (
+            vec!["sim", "--controller", "pid"],
+            "--controller pid: unknown",
+        ),
+        (vec!["sim", "--trials", "0"], "at least one trial"),
+        (
+            vec!["sim", "--mission", "flip-throw"],
+            "flip-throw: not available yet",
+        ),
+        (vec!["sim", "--pose-loss=-1"], "--pose-loss -1"),
+        (
+            vec!["sim", "--mission", "hover", "--pose-loss", "0.1"],
+            "flip-mission scenario",
+        ),
+    ] {
+        let (code, _, err) = mpcc(&args);
+        assert_eq!(code, Some(2), "{args:?}: {err}");
+        assert!(err.contains(want), "{args:?}: {err}");
+    }
+}
+
+#[test]
+fn a_failed_mission_exits_one_and_says_why() {
+    // Three times the mass the controllers believe: thrust-to-weight 1.3, no 5 pi flip.
+    let (code, out, err) = mpcc(&["sim", "--mass", "3", "--no-plots"]);
+    assert_eq!(code, Some(1), "{out}\n{err}");
+    assert!(out.contains("0 of 1 trials succeeded"), "{out}");
+    assert!(out.contains("FAILED seed 0 (mass 3.00 kg"), "{out}");
+    let (code, _, err) = mpcc(&["sim", "--mass", "0"]);
+    assert_eq!(code, Some(2));
+    assert!(err.contains("--mass 0"), "{err}");
+}
