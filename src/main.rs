@@ -58,6 +58,15 @@ struct SimArgs {
     /// No estimation noise or latency (the true state).
     #[arg(long)]
     perfect_sensing: bool,
+    /// Rally point, where the flip happens and which is held after it [m] (default 4,0,2).
+    #[arg(long, value_name = "X,Y,Z")]
+    rally: Option<String>,
+    /// Take-off height above home [m] (default 2; also the return height).
+    #[arg(long, value_name = "M")]
+    altitude: Option<f64>,
+    /// Pitch-rate reference of the flip [rad/s] (default 5*pi = 15.71).
+    #[arg(long, value_name = "RAD_S")]
+    flip_rate: Option<f64>,
     /// True vehicle mass [kg] (the controllers keep believing the nominal 1 kg).
     #[arg(long, value_name = "KG")]
     mass: Option<f64>,

@@ -60,6 +60,47 @@ fn check_solver(controller: &str, quiet: bool) -> Result<(), String> {
     Ok(())
 }
 
+/// The mission configuration of the arguments.
+fn mission_config(args: &SimArgs, kind: MissionKind) -> Result<MissionConfig, String> {
+    let mut m = MissionConfig::for_kind(kind);
+    if let Some(r) = &args.rally {
+        let v: Vec<f64> = r
+            .split(',')
+            .map(|s| s.trim().parse::<f64>())
+            .collect::<Result<_, _>>()
+            .map_err(|e| format!("--rally {r}: {e}; give X,Y,Z in m, e.g. 4,0,2"))?;
+        match v.as_slice() {
+            [x, y, z] if v.iter().all(|e| e.is_finite()) && *z >= 1.5 => {
+                m.rally_point = mpc_sim::nalgebra::Vector3::new(*x, *y, *z);
+            }
+            [_, _, z] if *z < 1.5 => {
+                return Err(format!(
+                    "--rally {r}: the flip needs room: a height of at least 1.5 m"
+                ));
+            }
+            _ => return Err(format!("--rally {r}: give three finite numbers X,Y,Z")),
+        }
+    }
+    if let Some(a) = args.altitude {
+        if !(a.is_finite() && a >= 0.5) {
+            return Err(format!("--altitude {a}: give a height of at least 0.5 m"));
+        }
+        m.takeoff_point.z = m.home.z + a;
+        if args.rally.is_none() {
+            m.rally_point.z = m.home.z + a;
+        }
+    }
+    if let Some(w) = args.flip_rate {
+        if !(w.is_finite() && w > 1.0 && w <= 20.0) {
+            return Err(format!(
+                "--flip-rate {w}: give a pitch rate in (1, 20] rad/s (the NMPC's rate bound is 20)"
+            ));
+        }
+        m.flip_rate = w;
+    }
+    Ok(m)
+}
+
 fn parse(args: &SimArgs) -> Result<(MissionKind, ControllerKind), String> {
     let mission = match args.mission.as_str() {
         "flip" => MissionKind::Flip,
@@ -111,18 +152,19 @@ fn flip_start(cfg: &SimConfig) -> Option<f64> {
 }
 
 pub(crate) fn run(args: &SimArgs) -> ExitCode {
-    let (mission, controller) = match parse(args) {
-        Ok(v) => v,
-        Err(e) => {
-            eprintln!("error: {e}");
-            return ExitCode::from(2);
-        }
-    };
+    let (_, controller, mission_cfg) =
+        match parse(args).and_then(|(m, c)| Ok((m, c, mission_config(args, m)?))) {
+            Ok(v) => v,
+            Err(e) => {
+                eprintln!("error: {e}");
+                return ExitCode::from(2);
+            }
+        };
     if let Err(e) = check_solver(controller.name(), args.json) {
         eprintln!("error: {e}");
         return ExitCode::FAILURE;
     }
-    let mut base = SimConfig::new(MissionConfig::for_kind(mission), controller);
+    let mut base = SimConfig::new(mission_cfg, controller);
     base.seed = args.seed;
     if let Some(m) = args.mass {
         base.plant.mass = m;

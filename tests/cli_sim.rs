@@ -138,3 +138,45 @@ fn a_failed_mission_exits_one_and_says_why() {
     assert_eq!(code, Some(2));
     assert!(err.contains("--mass 0"), "{err}");
 }
+
+#[test]
+fn mission_options_move_the_rally_point() {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("cli_sim_rally");
+    let _ = std::fs::remove_dir_all(&dir);
+    let (code, out, err) = mpcc(&[
+        "sim",
+        "--controller",
+        "nmpc",
+        "--rally",
+        "2,1,3",
+        "--flip-rate",
+        "12",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert_eq!(code, Some(0), "{out}\n{err}");
+    let mut rdr = csv::Reader::from_path(dir.join("flip.csv")).unwrap();
+    let headers = rdr.headers().unwrap().clone();
+    let col = |name: &str| headers.iter().position(|h| h == name).unwrap();
+    let (ix, iy, iz, iw, iphase) = (
+        col("x_ref"),
+        col("y_ref"),
+        col("z_ref"),
+        col("wy_ref"),
+        col("phase"),
+    );
+    let mut held = false;
+    let mut rate = 0.0f64;
+    for rec in rdr.records() {
+        let r = rec.unwrap();
+        let f = |i: usize| r[i].parse::<f64>().unwrap();
+        rate = rate.max(f(iw));
+        // The hold after the flip (phase 5) is at the given rally point.
+        if r[iphase].parse::<u8>().unwrap() == 5 {
+            held = true;
+            assert_eq!((f(ix), f(iy), f(iz)), (2.0, 1.0, 3.0));
+        }
+    }
+    assert!(held, "no hold phase in the log");
+    assert_eq!(rate, 12.0);
+}

@@ -18,3 +18,6 @@ pub mod plot;
 pub mod rate_loop;
 pub mod report;
 pub mod run;
+
+/// The linear-algebra crate of this crate's API (positions, quaternions).
+pub use nalgebra;

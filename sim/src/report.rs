@@ -636,16 +636,28 @@ pub fn table(run: &RunSummary) -> String {
             let _ = writeln!(s, "pose lost: return mode engaged after {d:.3} s");
         }
     }
-    for w in run.worst.iter().filter(|w| !w.success) {
+    if run.trials > 1 && !run.worst.is_empty() {
         let _ = writeln!(
             s,
-            "FAILED seed {} (mass {:.2} kg, rotor tau {:.0} ms, latency {:.1} ms, gust {:.1} m/s): {}",
+            "worst cases (failed first, then the slowest recoveries):"
+        );
+    }
+    for w in run.worst.iter().filter(|w| run.trials > 1 || !w.success) {
+        let verdict = if w.success {
+            format!("ok, recovered in {} s", opt(w.recovery_time_s, 2))
+        } else {
+            w.failures.join("; ")
+        };
+        let _ = writeln!(
+            s,
+            "{} seed {} (mass {:.2} kg, rotor tau {:.0} ms, latency {:.1} ms, gust {:.1} m/s): {}",
+            if w.success { "  " } else { "FAILED" },
             w.seed,
             w.mass_kg,
             w.rotor_tau_s * 1e3,
             w.latency_s * 1e3,
             w.gust_m_s,
-            w.failures.join("; ")
+            verdict
         );
     }
     s

@@ -311,7 +311,11 @@ fn plots_are_written_as_non_blank_pngs() {
         assert_eq!(png_size(&bytes), (WIDTH, HEIGHT), "{}", path.display());
         assert!((1000..=1400).contains(&WIDTH) && (800..=1000).contains(&HEIGHT));
         let (share, red, blue) = ink(&bytes);
-        assert!(share > 0.02, "{}: only {share} of the pixels drawn", path.display());
+        assert!(
+            share > 0.02,
+            "{}: only {share} of the pixels drawn",
+            path.display()
+        );
         assert!(red && blue, "{}: no red or no blue curve", path.display());
         assert!(
             bytes.len() > 20_000 && bytes.len() > 4 * blank,
