@@ -6,6 +6,7 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
+mod bench;
 mod sim;
 use mpc_dsl::lang::{ParseOptions, parse};
 use mpc_dsl::ocp::{Dynamics, Integrator, Ocp, ParamKind, Variable};
@@ -35,6 +36,37 @@ enum Command {
     },
     /// Generate a solver crate (Rust, `no_std`, with a C header) from a `.mpc` file.
     Build(BuildArgs),
+    /// Run the QR-bench closed loop (the peers' benchmark) with a generated solver; print
+    /// latency per phase, QP iterations and the final error; write the trajectory CSV.
+    Bench(BenchArgs),
+}
+
+#[derive(clap::Args)]
+struct BenchArgs {
+    /// Benchmark problem.
+    #[arg(long, default_value = "qrbench")]
+    model: String,
+    /// Horizon: 10 (QR-bench A, dt = 0.04) or 20 (QR-bench B, dt = 0.05).
+    #[arg(long, default_value_t = 10)]
+    horizon: usize,
+    /// The f32 solver (QR-bench A only).
+    #[arg(long)]
+    f32: bool,
+    /// Converged SQP at every step instead of one real-time iteration.
+    #[arg(long)]
+    sqp: bool,
+    /// Closed loops to time (the figures pool every step of every round).
+    #[arg(long, default_value_t = 20)]
+    rounds: usize,
+    /// Where to write the trajectory CSV (default bench-out/qrbench_n<N>_<scalar>.csv).
+    #[arg(long)]
+    csv: Option<PathBuf>,
+    /// Write no CSV.
+    #[arg(long)]
+    no_csv: bool,
+    /// Print the figures as one JSON object on stdout.
+    #[arg(long)]
+    json: bool,
 }
 
 #[derive(clap::Args)]
@@ -125,6 +157,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     match cli.command {
         Command::Sim(args) => sim::run(&args),
+        Command::Bench(args) => bench::run(&args),
         Command::Check { file, variant } => check(&file, variant),
         Command::Build(args) => build(&args),
     }

@@ -34,6 +34,15 @@ fn checked_in() -> Vec<(&'static str, Option<&'static str>, Options, &'static st
             "models/quadrotor_rates.mpc",
             Some("A"),
             Options {
+                crate_name: Some("quadrotor_rates_a".into()),
+                ..base.clone()
+            },
+            "generated/quadrotor_rates_a",
+        ),
+        (
+            "models/quadrotor_rates.mpc",
+            Some("A"),
+            Options {
                 scalar: Scalar::F32,
                 crate_name: Some("quadrotor_rates_f32".into()),
                 ..base.clone()

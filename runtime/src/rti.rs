@@ -38,10 +38,17 @@ pub struct RtiSettings<T> {
 
 impl<T: Real> RtiSettings<T> {
     /// Defaults: QP defaults with the dual warm start on (each QP starts from the previous
-    /// control step's multipliers), no shift, 50 SQP iterations to `1e-6` (f64) / `1e-4` (f32).
+    /// control step's multipliers) and the tolerances of a real-time iteration ([`Real::RTI_TOL`]
+    /// for stationarity, feasibility and complementarity: 1e-6 in f64; f32 keeps its QP
+    /// defaults), no shift, 50 SQP iterations to `1e-6` (f64) / `1e-4` (f32). The full SQP
+    /// ([`Rti::solve_sqp`]) solves its QPs at least to the QP solver's own defaults.
     pub const DEFAULT: Self = RtiSettings {
         qp: QpSettings {
             warm_start_dual: true,
+            tol_stat: T::RTI_TOL,
+            tol_eq: T::RTI_TOL,
+            tol_ineq: T::RTI_TOL,
+            tol_comp: T::RTI_TOL_COMP,
             ..QpSettings::DEFAULT
         },
         shift: false,
@@ -651,7 +658,13 @@ impl<
             self.linearize();
             let x_lin0 = self.x.first().copied().unwrap_or(*x0);
             self.qp.x0 = x0 - x_lin0;
-            self.solver.settings = self.settings.qp;
+            // The step test needs accurate steps: at least the QP solver's own tolerances.
+            let mut qs = self.settings.qp;
+            qs.tol_stat = qs.tol_stat.min(T::DEFAULT_TOL);
+            qs.tol_eq = qs.tol_eq.min(T::DEFAULT_TOL);
+            qs.tol_ineq = qs.tol_ineq.min(T::DEFAULT_TOL);
+            qs.tol_comp = qs.tol_comp.min(T::DEFAULT_TOL_COMP);
+            self.solver.settings = qs;
             last = self.solver.solve(&self.qp);
             if last.status != QpStatus::Solved || !self.step_is_finite() {
                 return self.info(RtiStatus::UsedPreviousPlan, last, it + 1);

@@ -1,0 +1,380 @@
+//! `mpcc bench`: the QR-bench closed loop exactly as the peers were measured on it
+//! (`docs/bench.md`): x0 = (0,0,2, 1,0,0,0, 0,0,0), reference (4,0,2) hover, first guess
+//! x_k = x0, u_k = 0, u0 held for one period, plant = the same ODE with RK4 in 10 substeps,
+//! 4 s. Times the preparation and feedback phases of every step over several rounds.
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Instant;
+
+use serde::Serialize;
+
+use crate::BenchArgs;
+
+/// Seconds flown in every round.
+const DURATION: f64 = 4.0;
+
+/// QR-bench's ODE (the anchors' formula), in f64.
+fn ode(x: &[f64; 10], u: &[f64; 4]) -> [f64; 10] {
+    let (qw, qx, qy, qz) = (x[3], x[4], x[5], x[6]);
+    let (c, wx, wy, wz) = (u[0], u[1], u[2], u[3]);
+    [
+        x[7],
+        x[8],
+        x[9],
+        0.5 * (-qx * wx - qy * wy - qz * wz),
+        0.5 * (qw * wx + qy * wz - qz * wy),
+        0.5 * (qw * wy - qx * wz + qz * wx),
+        0.5 * (qw * wz + qx * wy - qy * wx),
+        2.0 * (qw * qy + qx * qz) * c,
+        2.0 * (qy * qz - qw * qx) * c,
+        (1.0 - 2.0 * (qx * qx + qy * qy)) * c - 9.81,
+    ]
+}
+
+/// The plant: RK4 with `substeps` steps over `dt`, control held.
+pub(crate) fn plant(x: &[f64; 10], u: &[f64; 4], dt: f64, substeps: usize) -> [f64; 10] {
+    let h = dt / substeps as f64;
+    let mut x = *x;
+    let axpy = |a: &[f64; 10], s: f64, b: &[f64; 10]| -> [f64; 10] {
+        let mut o = *a;
+        for (oi, bi) in o.iter_mut().zip(b) {
+            *oi += s * bi;
+        }
+        o
+    };
+    for _ in 0..substeps {
+        let k1 = ode(&x, u);
+        let k2 = ode(&axpy(&x, 0.5 * h, &k1), u);
+        let k3 = ode(&axpy(&x, 0.5 * h, &k2), u);
+        let k4 = ode(&axpy(&x, h, &k3), u);
+        for i in 0..10 {
+            x[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+        }
+    }
+    x
+}
+
+/// The initial state of QR-bench.
+pub(crate) const X0: [f64; 10] = [0.0, 0.0, 2.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+
+/// One closed loop: the states (row k at t = k dt) and controls, and per-step figures.
+pub(crate) struct ClosedLoop {
+    pub dt: f64,
+    pub states: Vec<[f64; 10]>,
+    pub controls: Vec<[f64; 4]>,
+    pub prepare_us: Vec<f64>,
+    pub feedback_us: Vec<f64>,
+    pub qp_iterations: Vec<u32>,
+    pub sqp_iterations: Vec<u32>,
+    /// Steps whose full SQP stopped at its iteration limit (SQP mode; the iterate is kept).
+    pub sqp_limit_steps: usize,
+    /// Every step solved (RTI: status Ok; SQP: no fallback to the previous plan).
+    pub all_ok: bool,
+}
+
+/// Flies QR-bench once with solver crate `$m` (its `Real` may be f32 or f64).
+macro_rules! fly {
+    ($m:ident, $sqp:expr) => {{
+        use $m as m;
+        let mut s = Box::new(m::Solver::new());
+        let cast = |v: f64| v as m::Real;
+        let x0: [m::Real; 10] = X0.map(cast);
+        let _ = s.set_guess(&x0, &[0.0; 4]);
+        let steps = (DURATION / f64::from(m::DT)).round() as usize;
+        let dt = f64::from(m::DT);
+        let mut out = ClosedLoop {
+            dt,
+            states: vec![X0],
+            controls: Vec::new(),
+            prepare_us: Vec::new(),
+            feedback_us: Vec::new(),
+            qp_iterations: Vec::new(),
+            sqp_iterations: Vec::new(),
+            sqp_limit_steps: 0,
+            all_ok: true,
+        };
+        let mut x = X0;
+        for _ in 0..steps {
+            let t0 = Instant::now();
+            s.prepare();
+            let t1 = Instant::now();
+            let _ = s.set_x0(&x.map(cast));
+            let info = if $sqp { s.solve_sqp() } else { s.feedback() };
+            let t2 = Instant::now();
+            match info.status {
+                m::RtiStatus::Ok => {}
+                m::RtiStatus::MaxIterations if $sqp => out.sqp_limit_steps += 1,
+                _ => out.all_ok = false,
+            }
+            out.sqp_iterations.push(info.sqp_iterations);
+            out.prepare_us.push((t1 - t0).as_secs_f64() * 1e6);
+            out.feedback_us.push((t2 - t1).as_secs_f64() * 1e6);
+            out.qp_iterations.push(info.qp.iterations);
+            let u = s.u0().map(f64::from);
+            out.controls.push(u);
+            x = plant(&x, &u, dt, 10);
+            out.states.push(x);
+        }
+        out
+    }};
+}
+
+/// The cases compiled in: (horizon, f32).
+pub(crate) const CASES: [(usize, bool, &str); 3] = [
+    (
+        10,
+        false,
+        "quadrotor_rates_a (QR-bench A: N = 10, dt = 0.04, f64)",
+    ),
+    (
+        20,
+        false,
+        "quadrotor_rates (QR-bench B: N = 20, dt = 0.05, f64)",
+    ),
+    (
+        10,
+        true,
+        "quadrotor_rates_f32 (QR-bench A: N = 10, dt = 0.04, f32)",
+    ),
+];
+
+/// Flies the closed loop of the given case.
+pub(crate) fn fly_case(horizon: usize, f32: bool, sqp: bool) -> Option<ClosedLoop> {
+    match (horizon, f32) {
+        (10, false) => Some(fly!(quadrotor_rates_a, sqp)),
+        (20, false) => Some(fly!(quadrotor_rates, sqp)),
+        (10, true) => Some(fly!(quadrotor_rates_f32, sqp)),
+        _ => None,
+    }
+}
+
+/// Mean, median, 99th percentile, maximum.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub(crate) struct Stats {
+    pub mean: f64,
+    pub median: f64,
+    pub p99: f64,
+    pub max: f64,
+}
+
+impl Stats {
+    fn of(values: &[f64]) -> Self {
+        let mut v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
+        if v.is_empty() {
+            return Self::default();
+        }
+        v.sort_by(f64::total_cmp);
+        let n = v.len();
+        let at = |q: f64| v[((q * n as f64).ceil() as usize).clamp(1, n) - 1];
+        Self {
+            mean: v.iter().sum::<f64>() / n as f64,
+            median: at(0.5),
+            p99: at(0.99),
+            max: v[n - 1],
+        }
+    }
+}
+
+/// The JSON of `mpcc bench --json`.
+#[derive(Clone, Debug, Serialize)]
+struct Report {
+    model: String,
+    solver: String,
+    horizon: usize,
+    scalar: &'static str,
+    mode: &'static str,
+    rounds: usize,
+    steps: usize,
+    prepare_us: Stats,
+    feedback_us: Stats,
+    total_us: Stats,
+    qp_iterations_mean: f64,
+    qp_iterations_max: u32,
+    sqp_iterations_mean: f64,
+    sqp_limit_steps: usize,
+    final_position_error_m: f64,
+    all_ok: bool,
+    csv: Option<PathBuf>,
+}
+
+/// Writes the closed loop in the anchors' columns: row k is the state at t = k dt and the
+/// control applied then; the last row holds the state only.
+pub(crate) fn write_csv(path: &Path, run: &ClosedLoop) -> std::io::Result<()> {
+    use std::fmt::Write as _;
+    let mut s = String::from("t,px,py,pz,qw,qx,qy,qz,vx,vy,vz,c,wx,wy,wz\n");
+    for (k, x) in run.states.iter().enumerate() {
+        let _ = write!(s, "{}", k as f64 * run.dt);
+        for v in x {
+            let _ = write!(s, ",{v:e}");
+        }
+        match run.controls.get(k) {
+            Some(u) => {
+                for v in u {
+                    let _ = write!(s, ",{v:e}");
+                }
+            }
+            None => s.push_str(",,,,"),
+        }
+        s.push('\n');
+    }
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir)?;
+    }
+    std::fs::write(path, s)
+}
+
+pub(crate) fn run(args: &BenchArgs) -> ExitCode {
+    if args.model != "qrbench" {
+        eprintln!(
+            "error: --model {}: unknown; the benchmark problem is qrbench (QR-bench of \
+             docs/bench.md)",
+            args.model
+        );
+        return ExitCode::from(2);
+    }
+    let Some(&(_, _, solver)) = CASES
+        .iter()
+        .find(|c| c.0 == args.horizon && c.1 == args.f32)
+    else {
+        let have: Vec<String> = CASES
+            .iter()
+            .map(|c| format!("--horizon {}{}", c.0, if c.1 { " --f32" } else { "" }))
+            .collect();
+        eprintln!(
+            "error: --horizon {}{}: no solver generated for this case; compiled in: {}",
+            args.horizon,
+            if args.f32 { " --f32" } else { "" },
+            have.join(", ")
+        );
+        return ExitCode::from(2);
+    };
+    if args.rounds == 0 {
+        eprintln!("error: --rounds 0: run at least one round");
+        return ExitCode::from(2);
+    }
+    let mut prep = Vec::new();
+    let mut feed = Vec::new();
+    let mut total = Vec::new();
+    let mut last = None;
+    for _ in 0..args.rounds {
+        let Some(run) = fly_case(args.horizon, args.f32, args.sqp) else {
+            return ExitCode::FAILURE;
+        };
+        prep.extend(&run.prepare_us);
+        feed.extend(&run.feedback_us);
+        total.extend(
+            run.prepare_us
+                .iter()
+                .zip(&run.feedback_us)
+                .map(|(a, b)| a + b),
+        );
+        last = Some(run);
+    }
+    let Some(run) = last else {
+        return ExitCode::FAILURE;
+    };
+    let csv = if args.no_csv {
+        None
+    } else {
+        let path = args.csv.clone().unwrap_or_else(|| {
+            PathBuf::from(format!(
+                "bench-out/qrbench_n{}_{}{}.csv",
+                args.horizon,
+                if args.f32 { "f32" } else { "f64" },
+                if args.sqp { "_sqp" } else { "" }
+            ))
+        });
+        if let Err(e) = write_csv(&path, &run) {
+            eprintln!("error: {}: {e}", path.display());
+            return ExitCode::FAILURE;
+        }
+        Some(path)
+    };
+    let last_x = run.states.last().copied().unwrap_or(X0);
+    let err = ((last_x[0] - 4.0).powi(2) + last_x[1].powi(2) + (last_x[2] - 2.0).powi(2)).sqrt();
+    let iters: Vec<f64> = run.qp_iterations.iter().map(|&i| f64::from(i)).collect();
+    let report = Report {
+        model: args.model.clone(),
+        solver: solver.to_string(),
+        horizon: args.horizon,
+        scalar: if args.f32 { "f32" } else { "f64" },
+        mode: if args.sqp { "sqp" } else { "rti" },
+        rounds: args.rounds,
+        steps: run.controls.len(),
+        prepare_us: Stats::of(&prep),
+        feedback_us: Stats::of(&feed),
+        total_us: Stats::of(&total),
+        qp_iterations_mean: iters.iter().sum::<f64>() / iters.len().max(1) as f64,
+        qp_iterations_max: run.qp_iterations.iter().copied().max().unwrap_or(0),
+        sqp_iterations_mean: run
+            .sqp_iterations
+            .iter()
+            .map(|&i| f64::from(i))
+            .sum::<f64>()
+            / run.sqp_iterations.len().max(1) as f64,
+        sqp_limit_steps: run.sqp_limit_steps,
+        final_position_error_m: err,
+        all_ok: run.all_ok,
+        csv,
+    };
+    if args.json {
+        match serde_json::to_string(&report) {
+            Ok(s) => println!("{s}"),
+            Err(e) => {
+                eprintln!("error: JSON: {e}");
+                return ExitCode::FAILURE;
+            }
+        }
+    } else {
+        println!(
+            "QR-bench, {solver}, {} mode: {} rounds x {} steps",
+            report.mode, report.rounds, report.steps
+        );
+        println!(
+            "{:<10} {:>10} {:>10} {:>10} {:>10}",
+            "phase [us]", "mean", "median", "p99", "max"
+        );
+        for (name, s) in [
+            ("prepare", report.prepare_us),
+            ("feedback", report.feedback_us),
+            ("total", report.total_us),
+        ] {
+            println!(
+                "{name:<10} {:>10.1} {:>10.1} {:>10.1} {:>10.1}",
+                s.mean, s.median, s.p99, s.max
+            );
+        }
+        if args.sqp {
+            println!(
+                "SQP iterations per step: mean {:.2}; {} steps stopped at the iteration limit \
+                 (their iterate is kept)",
+                report.sqp_iterations_mean, report.sqp_limit_steps
+            );
+        }
+        println!(
+            "QP iterations per step{}: mean {:.2}, max {}; final position error {:.3e} m{}",
+            if args.sqp {
+                " (last QP of each step)"
+            } else {
+                ""
+            },
+            report.qp_iterations_mean,
+            report.qp_iterations_max,
+            report.final_position_error_m,
+            if report.all_ok {
+                String::new()
+            } else {
+                "; SOME STEPS DID NOT SOLVE".to_string()
+            }
+        );
+        if let Some(p) = &report.csv {
+            println!("wrote {}", p.display());
+        }
+    }
+    if report.all_ok {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::FAILURE
+    }
+}

@@ -1,0 +1,151 @@
+//! `mpcc bench`: the QR-bench closed loop against the peers' closed loops (CasADi's converged
+//! SQP, acados' RTI), its JSON and its errors.
+
+use std::path::Path;
+use std::process::Command;
+
+fn mpcc(args: &[&str]) -> (Option<i32>, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_mpcc"))
+        .args(args)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .expect("the mpcc binary runs");
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// Rows of a closed-loop CSV: the 10 states of each row.
+fn states(path: &Path) -> Vec<[f64; 10]> {
+    let mut rdr =
+        csv::Reader::from_path(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    rdr.records()
+        .map(|r| {
+            let r = r.unwrap();
+            let mut x = [0.0; 10];
+            for (i, v) in x.iter_mut().enumerate() {
+                *v = r[i + 1].parse().unwrap();
+            }
+            x
+        })
+        .collect()
+}
+
+fn max_position_difference(a: &[[f64; 10]], b: &[[f64; 10]]) -> f64 {
+    assert_eq!(a.len(), b.len(), "different numbers of rows");
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (0..3).map(|i| (x[i] - y[i]).abs()).fold(0.0, f64::max))
+        .fold(0.0, f64::max)
+}
+
+fn tmp(name: &str) -> std::path::PathBuf {
+    Path::new(env!("CARGO_TARGET_TMPDIR")).join(name)
+}
+
+/// Same problem, same answer: our converged SQP closed loop equals CasADi's (the paper's
+/// tool) for QR-bench A and B.
+#[test]
+fn converged_sqp_closed_loop_matches_casadi() {
+    for (horizon, anchor) in [
+        ("10", "casadi_qrbench_A.csv"),
+        ("20", "casadi_qrbench_B.csv"),
+    ] {
+        let csv = tmp(&format!("bench_sqp_{horizon}.csv"));
+        let (code, out, err) = mpcc(&[
+            "bench",
+            "--horizon",
+            horizon,
+            "--sqp",
+            "--rounds",
+            "1",
+            "--csv",
+            csv.to_str().unwrap(),
+        ]);
+        assert_eq!(code, Some(0), "{out}\n{err}");
+        let ours = states(&csv);
+        let theirs = states(
+            &Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("tests/data")
+                .join(anchor),
+        );
+        let d = max_position_difference(&ours, &theirs);
+        // The issue asks for 1e-3 m; the two converged solutions agree far closer.
+        assert!(d < 1e-6, "N = {horizon}: {d} m from CasADi's closed loop");
+    }
+}
+
+#[test]
+fn rti_json_and_csv_match_acados() {
+    let csv = tmp("bench_rti_a.csv");
+    let (code, out, err) = mpcc(&[
+        "bench",
+        "--rounds",
+        "2",
+        "--json",
+        "--csv",
+        csv.to_str().unwrap(),
+    ]);
+    assert_eq!(code, Some(0), "{err}");
+    let v: serde_json::Value = serde_json::from_str(out.trim()).expect("one JSON object");
+    for phase in ["prepare_us", "feedback_us", "total_us"] {
+        let s = &v[phase];
+        let get = |k: &str| {
+            s[k].as_f64()
+                .unwrap_or_else(|| panic!("{phase}.{k} in {v}"))
+        };
+        assert!(get("mean") > 0.0 && get("median") > 0.0);
+        assert!(get("median") <= get("p99") && get("p99") <= get("max"));
+    }
+    assert_eq!(v["steps"], 100);
+    assert_eq!(v["all_ok"], serde_json::Value::Bool(true));
+    let iters = v["qp_iterations_mean"].as_f64().unwrap();
+    assert!((1.0..10.0).contains(&iters), "{iters}");
+    // acados' final position error for A is 2.37e-3 m.
+    let e = v["final_position_error_m"].as_f64().unwrap();
+    assert!((e - 2.37e-3).abs() < 1e-5, "{e}");
+    let d = max_position_difference(
+        &states(&csv),
+        &states(&Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/acados_qrbench_A.csv")),
+    );
+    assert!(d < 1e-4, "{d} m from acados' RTI closed loop");
+}
+
+#[test]
+fn f32_solver_flies_the_same_closed_loop() {
+    let a = tmp("bench_f64.csv");
+    let b = tmp("bench_f32.csv");
+    for (path, extra) in [(&a, None), (&b, Some("--f32"))] {
+        let mut args = vec!["bench", "--rounds", "1", "--csv", path.to_str().unwrap()];
+        args.extend(extra);
+        let (code, out, err) = mpcc(&args);
+        assert_eq!(code, Some(0), "{out}\n{err}");
+    }
+    let d = max_position_difference(&states(&a), &states(&b));
+    assert!(d < 1e-3, "f32 closed loop {d} m from f64");
+}
+
+#[test]
+fn unsupported_cases_are_refused_with_what_exists() {
+    for (args, want) in [
+        (
+            vec!["bench", "--horizon", "40"],
+            "compiled in: --horizon 10, --horizon 20, --horizon 10 --f32",
+        ),
+        (
+            vec!["bench", "--horizon", "20", "--f32"],
+            "--horizon 20 --f32: no solver",
+        ),
+        (
+            vec!["bench", "--model", "pendulum"],
+            "--model pendulum: unknown",
+        ),
+        (vec!["bench", "--rounds", "0"], "--rounds 0"),
+    ] {
+        let (code, _, err) = mpcc(&args);
+        assert_eq!(code, Some(2), "{args:?}: {err}");
+        assert!(err.contains(want), "{args:?}: {err}");
+    }
+}
