@@ -126,6 +126,9 @@ pub struct Rti<
     yref_n: SVector<T, NYN>,
     w: SMatrix<T, NY, NY>,
     wn: SMatrix<T, NYN, NYN>,
+    /// Whether `w` / `wn` are diagonal (then `W J` is a row scaling, not a product).
+    w_diag: bool,
+    wn_diag: bool,
     lbx: SVector<T, NX>,
     ubx: SVector<T, NX>,
     lbu: SVector<T, NU>,
@@ -240,6 +243,8 @@ impl<
             yref_n: crate::zeros(),
             w: crate::zeros(),
             wn: crate::zeros(),
+            w_diag: true,
+            wn_diag: true,
             lbx: crate::filled(T::NEG_INF),
             ubx: crate::filled(T::INF),
             lbu: crate::filled(T::NEG_INF),
@@ -277,6 +282,8 @@ impl<
         }
         self.w = *w;
         self.wn = *wn;
+        self.w_diag = is_diagonal(w);
+        self.wn_diag = is_diagonal(wn);
         Ok(())
     }
 
@@ -481,12 +488,19 @@ impl<
             let mut jx = SMatrix::<T, NY, NX>::zeros();
             let mut ju = SMatrix::<T, NY, NU>::zeros();
             let r = self.model.residual(&x, &u, &p, &mut jx, &mut ju) - self.yref[k];
-            let wjx = w * jx;
-            let wju = w * ju;
+            let (wjx, wju) = if self.w_diag {
+                (scale_rows(&w, &jx), scale_rows(&w, &ju))
+            } else {
+                (w * jx, w * ju)
+            };
             s.q = jx.tr_mul(&wjx);
             s.s = ju.tr_mul(&wjx);
             s.r = ju.tr_mul(&wju);
-            let wr = w * r;
+            let wr = if self.w_diag {
+                scale_rows(&w, &r)
+            } else {
+                w * r
+            };
             s.gx = jx.tr_mul(&wr);
             s.gu = ju.tr_mul(&wr);
             s.lbx = self.lbx - x;
@@ -503,9 +517,13 @@ impl<
         let t = &mut self.qp.terminal;
         let mut jx = SMatrix::<T, NYN, NX>::zeros();
         let r = self.model.terminal_residual(&xn, &pn, &mut jx) - self.yref_n;
-        let wjx = wn * jx;
+        let (wjx, wr) = if self.wn_diag {
+            (scale_rows(&wn, &jx), scale_rows(&wn, &r))
+        } else {
+            (wn * jx, wn * r)
+        };
         t.q = jx.tr_mul(&wjx);
-        t.gx = jx.tr_mul(&(wn * r));
+        t.gx = jx.tr_mul(&wr);
         t.lbx = self.lbx - xn;
         t.ubx = self.ubx - xn;
         let h = self.model.terminal_constraints(&xn, &pn, &mut t.c);
@@ -723,4 +741,26 @@ impl<
         }
         self.info(RtiStatus::MaxIterations, last, self.settings.sqp_max_iter)
     }
+}
+
+/// Whether every off-diagonal entry of `m` is zero.
+fn is_diagonal<T: Real, const R: usize>(m: &SMatrix<T, R, R>) -> bool {
+    m.iter()
+        .enumerate()
+        .all(|(idx, &v)| idx % R == idx / R || v == T::ZERO)
+}
+
+/// `diag(w) * m`: row `i` of `m` scaled by `w[(i, i)]`.
+fn scale_rows<T: Real, const R: usize, const C: usize>(
+    w: &SMatrix<T, R, R>,
+    m: &SMatrix<T, R, C>,
+) -> SMatrix<T, R, C> {
+    let mut out = *m;
+    for i in 0..R {
+        let d = w[(i, i)];
+        for j in 0..C {
+            out[(i, j)] *= d;
+        }
+    }
+    out
 }

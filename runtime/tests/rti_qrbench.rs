@@ -126,3 +126,44 @@ fn config_a_in_f32_follows_f64() {
         );
     }
 }
+
+/// The Gauss-Newton Hessian and gradient of every stage equal J'WJ and J'W(y - yref) computed
+/// here with nalgebra, for a diagonal W (the row-scaling path) and a dense symmetric W (the
+/// product path), and the two paths agree where W is the same matrix.
+#[test]
+fn gauss_newton_terms_match_j_w_j_for_diagonal_and_dense_weights() {
+    use mpc_runtime::Model;
+    use nalgebra::SMatrix;
+    use support::quadrotor::{NY, Quadrotor, U_REF, X_REF};
+    let mut s = qrbench::<10>(0.04);
+    let x = SVector::<f64, NX>::from([0.3, -0.2, 1.9, 0.9, 0.1, -0.2, 0.3, 0.5, -0.4, 0.2]);
+    let u = SVector::<f64, NU>::from([9.0, 0.3, -0.2, 0.1]);
+    s.set_guess(&x, &u).unwrap();
+    let model = Quadrotor { dt: 0.04 };
+    let mut w_diag = SMatrix::<f64, NY, NY>::zeros();
+    for i in 0..NY {
+        w_diag[(i, i)] = 1.0 + i as f64;
+    }
+    // A dense positive definite weight: diag + a rank-one coupling.
+    let v = SVector::<f64, NY>::from_fn(|i, _| 0.1 * (i as f64 - 6.0));
+    let w_dense = w_diag + v * v.transpose();
+    let wn = SMatrix::<f64, NX, NX>::identity() * 3.0;
+    for w in [w_diag, w_dense] {
+        s.set_weights(&w, &wn).unwrap();
+        s.prepare();
+        let (mut jx, mut ju) = (
+            SMatrix::<f64, NY, NX>::zeros(),
+            SMatrix::<f64, NY, NU>::zeros(),
+        );
+        let y = model.residual(&x, &u, &SVector::zeros(), &mut jx, &mut ju);
+        let yref =
+            SVector::<f64, NY>::from_fn(|i, _| if i < NX { X_REF[i] } else { U_REF[i - NX] });
+        let st = &s.qp().stages[3];
+        let tol = 1e-9 * w.amax() * 100.0;
+        assert!((st.q - jx.transpose() * w * jx).amax() < tol);
+        assert!((st.s - ju.transpose() * w * jx).amax() < tol);
+        assert!((st.r - ju.transpose() * w * ju).amax() < tol);
+        assert!((st.gx - jx.transpose() * w * (y - yref)).amax() < tol * 10.0);
+        assert!((st.gu - ju.transpose() * w * (y - yref)).amax() < tol * 10.0);
+    }
+}
