@@ -1,0 +1,12 @@
+//! Puts `memory.x` on the linker search path and links with cortex-m-rt's `link.x`
+//! (here rather than in `.cargo/config.toml`, so an inherited `RUSTFLAGS` cannot drop it).
+use std::{env, fs, path::PathBuf};
+
+fn main() {
+    let out = PathBuf::from(env::var_os("OUT_DIR").expect("OUT_DIR"));
+    fs::write(out.join("memory.x"), include_bytes!("memory.x")).expect("write memory.x");
+    println!("cargo:rustc-link-search={}", out.display());
+    println!("cargo:rustc-link-arg=-Tlink.x");
+    println!("cargo:rerun-if-changed=memory.x");
+    println!("cargo:rerun-if-changed=build.rs");
+}

@@ -1,0 +1,281 @@
+//! Bare-metal proof: flies the f32 QR-bench closed loop (100 steps of 0.04 s, from (0, 0, 2)
+//! to hover at (4, 0, 2)) with the generated solver `generated/quadrotor_rates_f32` on a
+//! Cortex-M4F (qemu `mps2-an386`; the same binary runs on the Cortex-M7 `mps2-an500`) and
+//! prints, over semihosting, the per-step status, QP iterations and SysTick counts of
+//! `prepare` and `set_x0` + `feedback`, then a summary, the final state and the stack
+//! high-water mark. The loop mirrors `examples/build-rs/src/main.rs` exactly;
+//! `host_check.rs` flies it on the host and compares.
+//!
+//! Counter: qemu does not implement the DWT cycle counter; its SysTick runs from the
+//! board's 25 MHz system clock in *virtual* time, and under `-icount shift=0` one
+//! instruction is 1 ns of virtual time, so one SysTick tick is 40 instructions. The firmware
+//! checks that scale at start against `cortex_m::asm::delay` (a loop of known length).
+#![no_std]
+#![no_main]
+#![deny(unsafe_op_in_unsafe_fn)]
+
+use core::sync::atomic::{Ordering, compiler_fence};
+
+use cortex_m::peripheral::SYST;
+use cortex_m::peripheral::syst::SystClkSource;
+use cortex_m_rt::{ExceptionFrame, entry, exception};
+use cortex_m_semihosting::{debug, hprintln};
+use panic_semihosting as _;
+use quadrotor_rates_f32::{DT, NU, NX_MODEL, Real, RtiStatus, Solver};
+
+/// Instructions per SysTick tick: 1 ns per instruction (icount shift=0) at 25 MHz.
+const INSNS_PER_TICK: u32 = 40;
+/// Control steps flown.
+const STEPS: usize = 100;
+/// Stack paint pattern.
+const PAINT: u32 = 0xDEAD_BEEF;
+/// Words left unpainted below the painting function's stack pointer.
+const PAINT_MARGIN: usize = 256;
+
+/// The plant: the same rate model, 10 RK4 substeps per control interval (verbatim
+/// `examples/build-rs/src/main.rs`).
+fn plant(x: &[Real; NX_MODEL], u: &[Real; NU], dt: Real) -> [Real; NX_MODEL] {
+    let f = |x: &[Real; NX_MODEL]| -> [Real; NX_MODEL] {
+        let (qw, qx, qy, qz) = (x[3], x[4], x[5], x[6]);
+        let (c, wx, wy, wz) = (u[0], u[1], u[2], u[3]);
+        [
+            x[7],
+            x[8],
+            x[9],
+            0.5 * (-qx * wx - qy * wy - qz * wz),
+            0.5 * (qw * wx + qy * wz - qz * wy),
+            0.5 * (qw * wy - qx * wz + qz * wx),
+            0.5 * (qw * wz + qx * wy - qy * wx),
+            2.0 * (qw * qy + qx * qz) * c,
+            2.0 * (qy * qz - qw * qx) * c,
+            (1.0 - 2.0 * (qx * qx + qy * qy)) * c - 9.81,
+        ]
+    };
+    let axpy = |x: &[Real; NX_MODEL], k: &[Real; NX_MODEL], h: Real| {
+        core::array::from_fn(|i| x[i] + h * k[i])
+    };
+    let h = dt / 10.0;
+    let mut x = *x;
+    for _ in 0..10 {
+        let k1 = f(&x);
+        let k2 = f(&axpy(&x, &k1, h / 2.0));
+        let k3 = f(&axpy(&x, &k2, h / 2.0));
+        let k4 = f(&axpy(&x, &k3, h));
+        x = core::array::from_fn(|i| x[i] + h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]));
+    }
+    x
+}
+
+/// SysTick ticks elapsed since `start` (the counter counts down, 24 bits).
+fn ticks_since(start: u32) -> u32 {
+    start.wrapping_sub(SYST::get_current()) & 0x00FF_FFFF
+}
+
+/// Reads SysTick with compiler fences, so the measured code is not moved across it.
+fn now() -> u32 {
+    compiler_fence(Ordering::SeqCst);
+    let t = SYST::get_current();
+    compiler_fence(Ordering::SeqCst);
+    t
+}
+
+// The stack region from cortex-m-rt's linker script: `_stack_end` (lowest address, after
+// .bss/.uninit) to `_stack_start` (initial SP, top of RAM). Only their addresses are used.
+unsafe extern "C" {
+    static _stack_start: u32;
+    static _stack_end: u32;
+}
+
+fn stack_bounds() -> (usize, usize) {
+    (
+        (&raw const _stack_end) as usize,
+        (&raw const _stack_start) as usize,
+    )
+}
+
+/// Fills the unused stack (from its bottom to a margin below the current SP) with `PAINT`.
+#[inline(never)]
+fn paint_stack() {
+    let (bottom, _) = stack_bounds();
+    let sp = cortex_m::register::msp::read() as usize;
+    let mut p = bottom;
+    while p + PAINT_MARGIN < sp {
+        // SAFETY: `p` is word-aligned, in RAM, and below the live stack (no interrupts are
+        // enabled, so nothing else uses the stack below SP meanwhile).
+        unsafe { (p as *mut u32).write_volatile(PAINT) };
+        p += 4;
+    }
+}
+
+/// Bytes of stack used since the last `paint_stack`: from the top down to the lowest word
+/// that no longer holds the pattern.
+fn stack_high_water() -> usize {
+    let (bottom, top) = stack_bounds();
+    let mut p = bottom;
+    // SAFETY: reads word-aligned RAM inside the stack region.
+    while p < top && unsafe { (p as *const u32).read_volatile() } == PAINT {
+        p += 4;
+    }
+    top - p
+}
+
+/// The solver in a `static` (.bss), configured. Not inlined: the temporary that
+/// `singleton!` builds lives in this frame, which is gone before the loop starts.
+#[inline(never)]
+fn setup() -> &'static mut Solver {
+    let solver = cortex_m::singleton!(: Solver = Solver::unconfigured()).unwrap();
+    if solver.configure().is_err() {
+        hprintln!("configure failed");
+        debug::exit(debug::EXIT_FAILURE);
+    }
+    solver
+}
+
+#[entry]
+fn main() -> ! {
+    paint_stack();
+    let mut cp = cortex_m::Peripherals::take().unwrap();
+
+    // FPU: cortex-m-rt's reset handler grants CP10/CP11 full access on eabihf targets.
+    let cpacr = cp.SCB.cpacr.read();
+    let fpu_on = (cpacr >> 20) & 0xF == 0xF;
+    hprintln!("fpu: CPACR={:#010x} enabled={}", cpacr, fpu_on);
+    hprintln!("cpuid: {:#010x}", cp.CPUID.base.read());
+
+    cp.SYST.set_clock_source(SystClkSource::Core);
+    cp.SYST.set_reload(0x00FF_FFFF);
+    cp.SYST.clear_current();
+    cp.SYST.enable_counter();
+
+    // DWT cycle counter probe (qemu: not implemented, reads 0).
+    cp.DCB.enable_trace();
+    cp.DWT.enable_cycle_counter();
+    let c0 = cortex_m::peripheral::DWT::cycle_count();
+
+    // Calibration: cortex-m 0.7.10's delay(n) runs n + 1 iterations of `subs; bne`,
+    // 2n + 2 instructions.
+    let n = 2_000_000u32;
+    let t = now();
+    cortex_m::asm::delay(n);
+    let calib = ticks_since(t);
+    let dwt = cortex_m::peripheral::DWT::cycle_count().wrapping_sub(c0);
+    hprintln!(
+        "calib: {} instructions = {} ticks (expected {}); DWT CYCCNT delta {}",
+        2 * n + 2,
+        calib,
+        (2 * n + 2) / INSNS_PER_TICK,
+        dwt
+    );
+
+    let solver = setup();
+    hprintln!(
+        "main: stack pointer {} B below the top",
+        stack_bounds().1 - cortex_m::register::msp::read() as usize
+    );
+    hprintln!("solver: {} bytes (static)", core::mem::size_of::<Solver>());
+    let stack_setup = stack_high_water();
+    paint_stack();
+
+    let mut x: [Real; NX_MODEL] = [0.0, 0.0, 2.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+    let mut iterations = 0u32;
+    let mut all_ok = true;
+    let (mut prep_sum, mut prep_max, mut fb_sum, mut fb_max) = (0u64, 0u32, 0u64, 0u32);
+    let (mut rti_max, mut rti_min) = (0u32, u32::MAX);
+    let (mut stack_prepare, mut stack_feedback) = (0, 0);
+    for k in 0..STEPS {
+        // Step 0 also measures the stack of prepare and of set_x0 + feedback alone
+        // (outside the timed sections).
+        if k == 0 {
+            paint_stack();
+        }
+        let t0 = now();
+        solver.prepare();
+        let prep = ticks_since(t0);
+        if k == 0 {
+            stack_prepare = stack_high_water();
+            paint_stack();
+        }
+        let t1 = now();
+        let set = solver.set_x0(&x);
+        let info = solver.feedback();
+        let fb = ticks_since(t1);
+        if k == 0 {
+            stack_feedback = stack_high_water();
+        }
+        if set.is_err() {
+            hprintln!("step {}: non-finite state", k);
+            debug::exit(debug::EXIT_FAILURE);
+        }
+        all_ok &= info.status == RtiStatus::Ok;
+        iterations += info.qp.iterations;
+        prep_sum += u64::from(prep);
+        fb_sum += u64::from(fb);
+        prep_max = prep_max.max(prep);
+        fb_max = fb_max.max(fb);
+        rti_max = rti_max.max(prep + fb);
+        rti_min = rti_min.min(prep + fb);
+        hprintln!(
+            "step {} status={:?} iters={} prepare_ticks={} feedback_ticks={}",
+            k,
+            info.status,
+            info.qp.iterations,
+            prep,
+            fb
+        );
+        x = plant(&x, &solver.u0(), DT);
+    }
+    let stack_loop = stack_high_water();
+
+    let d = [x[0] - 4.0, x[1], x[2] - 2.0];
+    let err = libm::sqrtf(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+    let ipt = u64::from(INSNS_PER_TICK);
+    let steps = STEPS as u64;
+    hprintln!(
+        "steps={} all_ok={} mean_qp_iters={:.2}",
+        STEPS,
+        all_ok,
+        iterations as f32 / STEPS as f32
+    );
+    hprintln!("pos_err={:e}", err);
+    hprintln!("x_final={:?}", x);
+    hprintln!(
+        "insns/RTI step: mean={} min={} max={}",
+        (prep_sum + fb_sum) * ipt / steps,
+        u64::from(rti_min) * ipt,
+        u64::from(rti_max) * ipt
+    );
+    hprintln!(
+        "insns prepare: mean={} max={}; feedback (set_x0+feedback): mean={} max={}",
+        prep_sum * ipt / steps,
+        u64::from(prep_max) * ipt,
+        fb_sum * ipt / steps,
+        u64::from(fb_max) * ipt
+    );
+    let (bottom, top) = stack_bounds();
+    hprintln!(
+        "stack high-water: setup={} B, loop={} B (prepare {} B, set_x0+feedback {} B; region {} B)",
+        stack_setup,
+        stack_loop,
+        stack_prepare,
+        stack_feedback,
+        top - bottom
+    );
+    hprintln!("DONE");
+    debug::exit(if all_ok && fpu_on {
+        debug::EXIT_SUCCESS
+    } else {
+        debug::EXIT_FAILURE
+    });
+    loop {
+        cortex_m::asm::wfi();
+    }
+}
+
+#[exception]
+unsafe fn HardFault(ef: &ExceptionFrame) -> ! {
+    hprintln!("HardFault: {:?}", ef);
+    debug::exit(debug::EXIT_FAILURE);
+    loop {
+        cortex_m::asm::wfi();
+    }
+}
