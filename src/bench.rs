@@ -121,7 +121,7 @@ macro_rules! fly {
 }
 
 /// The cases compiled in: (horizon, f32).
-pub(crate) const CASES: [(usize, bool, &str); 3] = [
+pub(crate) const CASES: [(usize, bool, &str); 6] = [
     (
         10,
         false,
@@ -132,10 +132,21 @@ pub(crate) const CASES: [(usize, bool, &str); 3] = [
         false,
         "quadrotor_rates (QR-bench B: N = 20, dt = 0.05, f64)",
     ),
+    (40, false, "quadrotor_rates_n40 (N = 40, dt = 0.025, f64)"),
     (
         10,
         true,
         "quadrotor_rates_f32 (QR-bench A: N = 10, dt = 0.04, f32)",
+    ),
+    (
+        20,
+        true,
+        "quadrotor_rates_b_f32 (QR-bench B: N = 20, dt = 0.05, f32)",
+    ),
+    (
+        40,
+        true,
+        "quadrotor_rates_n40_f32 (N = 40, dt = 0.025, f32)",
     ),
 ];
 
@@ -144,7 +155,10 @@ pub(crate) fn fly_case(horizon: usize, f32: bool, sqp: bool) -> Option<ClosedLoo
     match (horizon, f32) {
         (10, false) => Some(fly!(quadrotor_rates_a, sqp)),
         (20, false) => Some(fly!(quadrotor_rates, sqp)),
+        (40, false) => Some(fly!(quadrotor_rates_n40, sqp)),
         (10, true) => Some(fly!(quadrotor_rates_f32, sqp)),
+        (20, true) => Some(fly!(quadrotor_rates_b_f32, sqp)),
+        (40, true) => Some(fly!(quadrotor_rates_n40_f32, sqp)),
         _ => None,
     }
 }

@@ -46,10 +46,10 @@ struct BenchArgs {
     /// Benchmark problem.
     #[arg(long, default_value = "qrbench")]
     model: String,
-    /// Horizon: 10 (QR-bench A, dt = 0.04) or 20 (QR-bench B, dt = 0.05).
+    /// Horizon: 10 (QR-bench A, dt = 0.04), 20 (QR-bench B, dt = 0.05) or 40 (dt = 0.025).
     #[arg(long, default_value_t = 10)]
     horizon: usize,
-    /// The f32 solver (QR-bench A only).
+    /// The f32 solver.
     #[arg(long)]
     f32: bool,
     /// Converged SQP at every step instead of one real-time iteration.

@@ -50,6 +50,35 @@ fn checked_in() -> Vec<(&'static str, Option<&'static str>, Options, &'static st
             "generated/quadrotor_rates_f32",
         ),
         (
+            "models/quadrotor_rates.mpc",
+            None,
+            Options {
+                scalar: Scalar::F32,
+                crate_name: Some("quadrotor_rates_b_f32".into()),
+                ..base.clone()
+            },
+            "generated/quadrotor_rates_b_f32",
+        ),
+        (
+            "models/quadrotor_rates.mpc",
+            Some("N40"),
+            Options {
+                crate_name: Some("quadrotor_rates_n40".into()),
+                ..base.clone()
+            },
+            "generated/quadrotor_rates_n40",
+        ),
+        (
+            "models/quadrotor_rates.mpc",
+            Some("N40"),
+            Options {
+                scalar: Scalar::F32,
+                crate_name: Some("quadrotor_rates_n40_f32".into()),
+                ..base.clone()
+            },
+            "generated/quadrotor_rates_n40_f32",
+        ),
+        (
             "models/paper_pointmass.mpc",
             None,
             base.clone(),

@@ -1,0 +1,163 @@
+//! Criterion benchmarks of the generated solvers (`generated/`), each in its closed loop:
+//!
+//! - `qrbench/<case>/{prepare,feedback,step}` for QR-bench with N = 10, 20, 40 in f64 and f32
+//!   (`quadrotor_rates_a`, `quadrotor_rates`, `quadrotor_rates_n40` and their `_f32`
+//!   siblings): the closed loop of `mpcc bench` (x0 = (0,0,2, 1,0,0,0, 0,0,0), hover at
+//!   (4, 0, 2), RK4 plant with 10 substeps), restarted after 4 s; each timed iteration is one
+//!   control step.
+//! - `pointmass/{prepare,feedback,step}`: the paper's point-mass MPC tracking a 1 m step, the
+//!   exact triple-integrator plant.
+//! - `probe/{prepare,feedback,step}`: the probe model, with its own prediction as the plant.
+//!
+//! The QP alone against clarabel on the identical QP is `cargo bench --bench runtime`
+//! (`qp/{mpcc,clarabel}/N{10,20}`). Run with `cargo bench --bench generated`.
+
+use std::hint::black_box;
+use std::time::{Duration, Instant};
+
+use criterion::{Criterion, criterion_group, criterion_main};
+
+const X0: [f64; 10] = [0.0, 0.0, 2.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+
+fn ode(x: &[f64; 10], u: &[f64; 4]) -> [f64; 10] {
+    let (qw, qx, qy, qz) = (x[3], x[4], x[5], x[6]);
+    let (c, wx, wy, wz) = (u[0], u[1], u[2], u[3]);
+    [
+        x[7],
+        x[8],
+        x[9],
+        0.5 * (-qx * wx - qy * wy - qz * wz),
+        0.5 * (qw * wx + qy * wz - qz * wy),
+        0.5 * (qw * wy - qx * wz + qz * wx),
+        0.5 * (qw * wz + qx * wy - qy * wx),
+        2.0 * (qw * qy + qx * qz) * c,
+        2.0 * (qy * qz - qw * qx) * c,
+        (1.0 - 2.0 * (qx * qx + qy * qy)) * c - 9.81,
+    ]
+}
+
+fn plant(x: &[f64; 10], u: &[f64; 4], dt: f64) -> [f64; 10] {
+    let h = dt / 10.0;
+    let mut x = *x;
+    let axpy = |a: &[f64; 10], s: f64, b: &[f64; 10]| -> [f64; 10] {
+        core::array::from_fn(|i| a[i] + s * b[i])
+    };
+    for _ in 0..10 {
+        let k1 = ode(&x, u);
+        let k2 = ode(&axpy(&x, 0.5 * h, &k1), u);
+        let k3 = ode(&axpy(&x, 0.5 * h, &k2), u);
+        let k4 = ode(&axpy(&x, h, &k3), u);
+        x = core::array::from_fn(|i| x[i] + h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]));
+    }
+    x
+}
+
+/// Times one phase of the closed loop of solver crate `$m`; `$reset` builds a fresh solver
+/// and state, `$step` flies one step given the solver and the state (returns the new state).
+macro_rules! closed_loop_group {
+    ($c:expr, $name:expr, $steps:expr, $new:expr, $plant:expr) => {{
+        let mut group = $c.benchmark_group($name);
+        for phase in ["prepare", "feedback", "step"] {
+            let (mut s, mut x) = $new;
+            let mut k = 0usize;
+            group.bench_function(phase, |b| {
+                b.iter_custom(|iters| {
+                    let mut total = Duration::ZERO;
+                    for _ in 0..iters {
+                        if k == $steps {
+                            (s, x) = $new;
+                            k = 0;
+                        }
+                        let t0 = Instant::now();
+                        s.prepare();
+                        let t1 = Instant::now();
+                        let _ = s.set_x0(&x);
+                        let info = s.feedback();
+                        let t2 = Instant::now();
+                        black_box(info);
+                        total += match phase {
+                            "prepare" => t1 - t0,
+                            "feedback" => t2 - t1,
+                            _ => t2 - t0,
+                        };
+                        x = $plant(&s, &x);
+                        k += 1;
+                    }
+                    total
+                })
+            });
+        }
+        group.finish();
+    }};
+}
+
+macro_rules! qrbench {
+    ($c:expr, $m:ident, $name:expr) => {{
+        use $m as m;
+        let new = || {
+            let mut s = Box::new(m::Solver::new());
+            let x0: [m::Real; 10] = X0.map(|v| v as m::Real);
+            let _ = s.set_guess(&x0, &[0.0; 4]);
+            (s, x0)
+        };
+        let steps = (4.0 / f64::from(m::DT)).round() as usize;
+        let plant = |s: &m::Solver, x: &[m::Real; 10]| -> [m::Real; 10] {
+            let u = s.u0().map(f64::from);
+            plant(&x.map(f64::from), &u, f64::from(m::DT)).map(|v| v as m::Real)
+        };
+        closed_loop_group!($c, $name, steps, new(), plant);
+    }};
+}
+
+fn benches(c: &mut Criterion) {
+    qrbench!(c, quadrotor_rates_a, "qrbench/N10_f64");
+    qrbench!(c, quadrotor_rates, "qrbench/N20_f64");
+    qrbench!(c, quadrotor_rates_n40, "qrbench/N40_f64");
+    qrbench!(c, quadrotor_rates_f32, "qrbench/N10_f32");
+    qrbench!(c, quadrotor_rates_b_f32, "qrbench/N20_f32");
+    qrbench!(c, quadrotor_rates_n40_f32, "qrbench/N40_f32");
+
+    {
+        use paper_pointmass as m;
+        let new = || {
+            let mut s = Box::new(m::Solver::new());
+            let mut xref = [0.0; 9];
+            xref[0] = 1.0;
+            let _ = s.set_xref_all(&xref);
+            (s, [0.0; 9])
+        };
+        // The exact plant: the triple integrator over dt with the applied jerk.
+        let plant = |s: &m::Solver, x: &[f64; 9]| -> [f64; 9] {
+            let j = s.u0();
+            let dt = m::DT;
+            let mut n = *x;
+            for i in 0..3 {
+                let (p, v, a) = (x[i], x[3 + i], x[6 + i]);
+                n[i] = p + v * dt + a * dt * dt / 2.0 + j[i] * dt * dt * dt / 6.0;
+                n[3 + i] = v + a * dt + j[i] * dt * dt / 2.0;
+                n[6 + i] = a + j[i] * dt;
+            }
+            n
+        };
+        closed_loop_group!(c, "pointmass", 100, new(), plant);
+    }
+
+    {
+        use quadrotor_probe as m;
+        let new = || {
+            let s = Box::new(m::Solver::new());
+            let x0 = s.state(0).unwrap_or([0.0; m::NX_MODEL]);
+            (s, x0)
+        };
+        // The solver's own prediction one interval ahead as the plant.
+        let plant = |s: &m::Solver, x: &[f64; m::NX_MODEL]| s.state(1).unwrap_or(*x);
+        closed_loop_group!(c, "probe", 80, new(), plant);
+    }
+}
+
+criterion_group! {
+    name = generated;
+    config = Criterion::default().warm_up_time(Duration::from_millis(500)).measurement_time(Duration::from_secs(2));
+    targets = benches
+}
+criterion_main!(generated);
