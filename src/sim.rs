@@ -37,6 +37,13 @@ fn check_solver(controller: &str, quiet: bool) -> Result<(), String> {
     let Some((_, model, dir)) = SOLVERS.iter().find(|s| s.0 == controller) else {
         return Ok(());
     };
+    if !root.join(model).is_file() {
+        // An installed binary away from its checkout: nothing to compare with.
+        if !quiet {
+            eprintln!("solver: {model} not found beside this binary's sources; check skipped");
+        }
+        return Ok(());
+    }
     let opts = Options {
         runtime: RuntimeDep::Path("../../runtime".into()),
         ..Options::new()
@@ -144,7 +151,7 @@ fn parse(args: &SimArgs) -> Result<(MissionKind, ControllerKind), String> {
 /// The time of the flip's start in a nominal run, for `--pose-loss`: found by flying the
 /// mission once without the loss (deterministic).
 fn flip_start(cfg: &SimConfig) -> Option<f64> {
-    let res = run_trial(cfg);
+    let res = run_trial(cfg).ok()?;
     res.transitions
         .iter()
         .find(|t| t.phase == Phase::Flip)
@@ -171,6 +178,10 @@ pub(crate) fn run(args: &SimArgs) -> ExitCode {
     }
     if args.perfect_sensing {
         base.estimator = EstimatorConfig::perfect();
+    }
+    if let Err(e) = base.validate() {
+        eprintln!("error: {e}");
+        return ExitCode::from(2);
     }
     if let Some(after) = args.pose_loss {
         match flip_start(&base) {
@@ -208,6 +219,14 @@ pub(crate) fn run(args: &SimArgs) -> ExitCode {
     };
     let (summaries, first) = fly_all(&configs, &bar);
     bar.finish_and_clear();
+    if summaries.len() != configs.len() {
+        eprintln!(
+            "error: only {} of {} trials could be flown",
+            summaries.len(),
+            configs.len()
+        );
+        return ExitCode::FAILURE;
+    }
     let run = report::aggregate(&args.mission, controller.name(), &summaries);
     if args.json {
         match serde_json::to_string(&run) {
@@ -255,7 +274,15 @@ fn fly_all(configs: &[SimConfig], bar: &ProgressBar) -> (Vec<TrialSummary>, Opti
                 loop {
                     let i = next.fetch_add(1, Ordering::Relaxed);
                     let Some(cfg) = configs.get(i) else { break };
-                    let res = run_trial(cfg);
+                    let res = match run_trial(cfg) {
+                        Ok(r) => r,
+                        Err(e) => {
+                            // Validated before flying; a draw cannot leave the ranges.
+                            eprintln!("error: trial {i}: {e}");
+                            bar.inc(1);
+                            continue;
+                        }
+                    };
                     let summary = report::summarize(&res);
                     if let Ok(mut o) = out.lock()
                         && let Some(slot) = o.get_mut(i)

@@ -151,8 +151,53 @@ pub struct TrialResult {
     pub failsafe_at: Option<f64>,
 }
 
+/// A configuration the simulator cannot fly.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum SimError {
+    /// A parameter is out of its range; the message names it and the range.
+    #[error("invalid simulation setting: {0}")]
+    Invalid(String),
+}
+
+impl SimConfig {
+    /// Checks the settings a trial depends on.
+    ///
+    /// # Errors
+    /// [`SimError::Invalid`] naming the first bad setting.
+    pub fn validate(&self) -> Result<(), SimError> {
+        let bad = |what: &str| Err(SimError::Invalid(what.to_string()));
+        if !(self.dt.is_finite() && self.dt > 0.0 && self.dt <= 0.004) {
+            return bad("dt must be in (0, 0.004] s (the rate loop runs at 250 Hz or faster)");
+        }
+        if !(self.t_max.is_finite() && self.t_max > 0.0 && self.t_max <= 3600.0) {
+            return bad("t_max must be in (0, 3600] s");
+        }
+        for (name, p) in [("plant", &self.plant), ("nominal", &self.nominal)] {
+            let inertia_ok = p.inertia.iter().all(|v| v.is_finite() && *v > 0.0);
+            if !(p.mass.is_finite() && p.mass > 0.0 && inertia_ok) {
+                return Err(SimError::Invalid(format!(
+                    "{name}: mass and inertia must be finite and positive"
+                )));
+            }
+            if !(p.rotor_tau.is_finite() && p.rotor_tau > 0.0) {
+                return Err(SimError::Invalid(format!(
+                    "{name}: rotor_tau must be finite and positive"
+                )));
+            }
+        }
+        if !(self.estimator.latency.is_finite() && (0.0..=0.5).contains(&self.estimator.latency)) {
+            return bad("estimator latency must be in [0, 0.5] s");
+        }
+        Ok(())
+    }
+}
+
 /// Runs one closed-loop trial.
-pub fn run_trial(cfg: &SimConfig) -> TrialResult {
+///
+/// # Errors
+/// [`SimError`] if the configuration is invalid ([`SimConfig::validate`]).
+pub fn run_trial(cfg: &SimConfig) -> Result<TrialResult, SimError> {
+    cfg.validate()?;
     let dt = cfg.dt;
     let mut plant = Plant::new(cfg.plant.clone(), QuadState::at_rest(cfg.mission.home));
     let mut est = Estimator::new(cfg.estimator.clone(), cfg.seed);
@@ -286,7 +331,7 @@ pub fn run_trial(cfg: &SimConfig) -> TrialResult {
             Contact::Airborne => on_ground = false,
         }
     }
-    TrialResult {
+    Ok(TrialResult {
         config: cfg.clone(),
         samples,
         transitions: mission.transitions().to_vec(),
@@ -294,5 +339,5 @@ pub fn run_trial(cfg: &SimConfig) -> TrialResult {
         touchdown,
         pose_lost_at,
         failsafe_at: mission.failsafe_since(),
-    }
+    })
 }

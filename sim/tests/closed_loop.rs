@@ -97,13 +97,13 @@ fn check_flip(res: &TrialResult) {
 
 #[test]
 fn default_flip_paper_controller() {
-    let res = run_trial(&flip(ControllerKind::Paper, 0));
+    let res = run_trial(&flip(ControllerKind::Paper, 0)).unwrap();
     check_flip(&res);
 }
 
 #[test]
 fn default_flip_nmpc_controller() {
-    let res = run_trial(&flip(ControllerKind::Nmpc, 0));
+    let res = run_trial(&flip(ControllerKind::Nmpc, 0)).unwrap();
     check_flip(&res);
 }
 
@@ -111,7 +111,7 @@ fn default_flip_nmpc_controller() {
 fn ten_noisy_trials_succeed_with_both_controllers() {
     for controller in [ControllerKind::Paper, ControllerKind::Nmpc] {
         for seed in 1..=10 {
-            let res = run_trial(&flip(controller, seed));
+            let res = run_trial(&flip(controller, seed)).unwrap();
             check_flip(&res);
         }
     }
@@ -120,9 +120,9 @@ fn ten_noisy_trials_succeed_with_both_controllers() {
 /// The trials differ: the noise is really drawn from the seed.
 #[test]
 fn seeds_change_the_noise() {
-    let a = run_trial(&flip(ControllerKind::Nmpc, 1));
-    let b = run_trial(&flip(ControllerKind::Nmpc, 2));
-    let a2 = run_trial(&flip(ControllerKind::Nmpc, 1));
+    let a = run_trial(&flip(ControllerKind::Nmpc, 1)).unwrap();
+    let b = run_trial(&flip(ControllerKind::Nmpc, 2)).unwrap();
+    let a2 = run_trial(&flip(ControllerKind::Nmpc, 1)).unwrap();
     let za: Vec<f64> = a.samples.iter().map(|s| s.z).collect();
     let zb: Vec<f64> = b.samples.iter().map(|s| s.z).collect();
     let za2: Vec<f64> = a2.samples.iter().map(|s| s.z).collect();
@@ -139,7 +139,7 @@ fn monte_carlo(controller: ControllerKind, trials: u64) -> (usize, Vec<String>) 
                 s.spawn(move || {
                     (0..trials)
                         .filter(|i| i % 2 == w)
-                        .map(|i| summarize(&run_trial(&base.randomized(1000 + i))))
+                        .map(|i| summarize(&run_trial(&base.randomized(1000 + i)).unwrap()))
                         .collect::<Vec<_>>()
                 })
             })
@@ -201,11 +201,11 @@ fn randomized_draws_stay_in_their_ranges() {
 #[test]
 fn pose_loss_while_inverted_triggers_return_and_landing_at_home() {
     for controller in [ControllerKind::Paper, ControllerKind::Nmpc] {
-        let nominal = run_trial(&flip(controller, 3));
+        let nominal = run_trial(&flip(controller, 3)).unwrap();
         let t_flip = phase_time(&nominal, Phase::Flip);
         // Half way through the turn: inverted.
         let t_loss = t_flip + 0.2;
-        let res = run_trial(&flip(controller, 3).with_pose_loss_in_flip(t_loss));
+        let res = run_trial(&flip(controller, 3).with_pose_loss_in_flip(t_loss)).unwrap();
         let s = rows(&res, t_loss - 1e-9, t_loss + 1e-3).next().unwrap();
         let up = 1.0 - 2.0 * (s.qx * s.qx + s.qy * s.qy); // world z of body z
         assert!(up < -0.5, "{controller:?}: not inverted at the loss ({up})");
@@ -247,7 +247,7 @@ fn a_weak_vehicle_fails_the_flip() {
     // Thrust-to-weight about 1.3 instead of 4: no 5 pi flip possible.
     c.plant.omega_max *= 0.57;
     c.nominal.omega_max *= 0.57;
-    let res = run_trial(&c);
+    let res = run_trial(&c).unwrap();
     let s = summarize(&res);
     assert!(!s.success, "a T/W 1.3 vehicle passed: {s:?}");
     assert!(!s.failures.is_empty());
@@ -259,7 +259,7 @@ fn hover_and_step_missions_land_where_they_should() {
     for kind in [MissionKind::Hover, MissionKind::Step] {
         for controller in [ControllerKind::Paper, ControllerKind::Nmpc] {
             let c = SimConfig::new(MissionConfig::for_kind(kind), controller);
-            let res = run_trial(&c);
+            let res = run_trial(&c).unwrap();
             let s = summarize(&res);
             assert!(s.success, "{kind:?} {controller:?}: {:?}", s.failures);
             let td = res.touchdown.unwrap();
@@ -269,6 +269,66 @@ fn hover_and_step_missions_land_where_they_should() {
                 c.mission.home
             };
             assert!((Vector3::new(td.p.x - want.x, td.p.y - want.y, 0.0)).norm() < 0.25);
+        }
+    }
+}
+
+#[test]
+fn invalid_configurations_are_refused_with_the_setting_named() {
+    use mpc_sim::run::SimError;
+    let ok = flip(ControllerKind::Nmpc, 0);
+    assert!(ok.validate().is_ok());
+    let cases: Vec<(SimConfig, &str)> = vec![
+        (
+            SimConfig {
+                dt: 0.0,
+                ..ok.clone()
+            },
+            "dt",
+        ),
+        (
+            SimConfig {
+                dt: 0.01,
+                ..ok.clone()
+            },
+            "dt",
+        ),
+        (
+            SimConfig {
+                t_max: f64::NAN,
+                ..ok.clone()
+            },
+            "t_max",
+        ),
+        (
+            {
+                let mut c = ok.clone();
+                c.plant.mass = -1.0;
+                c
+            },
+            "plant: mass",
+        ),
+        (
+            {
+                let mut c = ok.clone();
+                c.nominal.rotor_tau = 0.0;
+                c
+            },
+            "nominal: rotor_tau",
+        ),
+        (
+            {
+                let mut c = ok.clone();
+                c.estimator.latency = 2.0;
+                c
+            },
+            "latency",
+        ),
+    ];
+    for (c, want) in cases {
+        match run_trial(&c) {
+            Err(SimError::Invalid(m)) => assert!(m.contains(want), "{m} lacks {want}"),
+            Ok(_) => panic!("{want}: an invalid configuration was flown"),
         }
     }
 }
