@@ -19,7 +19,9 @@ use serde_json::Value;
 
 const TARGET: &str = "aarch64-unknown-linux-gnu";
 const LINKER: &str = "aarch64-linux-gnu-gcc";
-const QEMU: &str = "qemu-aarch64";
+/// qemu's aarch64 user-mode emulator: Debian's `qemu-user` installs the first name,
+/// `qemu-user-static` the second.
+const QEMUS: [&str; 2] = ["qemu-aarch64", "qemu-aarch64-static"];
 /// The nearest core qemu 7.2 models to the Odroid M1's Cortex-A55 (ARMv8.2; qemu has no A55):
 /// its in-order predecessor, ARMv8.0, so the binary needs nothing past the baseline either.
 const QEMU_CPU: &str = "cortex-a53";
@@ -68,11 +70,19 @@ fn sysroot() -> Result<PathBuf, String> {
     Ok(dir.to_path_buf())
 }
 
-/// Checks the tools before minutes of building; returns qemu's sysroot.
-fn preflight() -> Result<PathBuf, String> {
+struct Tools {
+    qemu: &'static str,
+    sysroot: PathBuf,
+}
+
+/// Checks the tools before minutes of building.
+fn preflight() -> Result<Tools, String> {
     let mut missing = Vec::new();
-    if !succeeds(Command::new(QEMU).arg("--version")) {
-        missing.push(QEMU);
+    let qemu = QEMUS
+        .into_iter()
+        .find(|q| succeeds(Command::new(q).arg("--version")));
+    if qemu.is_none() {
+        missing.push(QEMUS[0]);
     }
     if !succeeds(Command::new(LINKER).arg("--version")) {
         missing.push(LINKER);
@@ -91,7 +101,10 @@ fn preflight() -> Result<PathBuf, String> {
     if !missing.is_empty() {
         return Err(format!("missing {}: {INSTALL}", missing.join(", ")));
     }
-    sysroot()
+    Ok(Tools {
+        qemu: qemu.unwrap_or(QEMUS[0]),
+        sysroot: sysroot()?,
+    })
 }
 
 /// Cross-builds `mpcc` into its own target dir (the outer build holds the lock on its own).
@@ -134,12 +147,12 @@ fn build() -> Result<PathBuf, String> {
     Ok(bin)
 }
 
-/// The aarch64 `mpcc` and qemu's sysroot, built once for both tests.
-fn aarch64_mpcc() -> &'static (PathBuf, PathBuf) {
-    static BIN: OnceLock<Result<(PathBuf, PathBuf), String>> = OnceLock::new();
+/// The aarch64 `mpcc` and the tools to run it, built once for both tests.
+fn aarch64_mpcc() -> &'static (PathBuf, Tools) {
+    static BIN: OnceLock<Result<(PathBuf, Tools), String>> = OnceLock::new();
     match BIN.get_or_init(|| {
-        let sysroot = preflight()?;
-        Ok((build()?, sysroot))
+        let tools = preflight()?;
+        Ok((build()?, tools))
     }) {
         Ok(b) => b,
         Err(e) => panic!("{e}"),
@@ -199,13 +212,13 @@ fn host(args: &[&str]) -> Run {
 }
 
 fn emulated(args: &[&str]) -> Run {
-    let (bin, sysroot) = aarch64_mpcc();
-    let mut cmd = Command::new(QEMU);
+    let (bin, tools) = aarch64_mpcc();
+    let mut cmd = Command::new(tools.qemu);
     cmd.args(["-cpu", QEMU_CPU, "-L"])
-        .arg(sysroot)
+        .arg(&tools.sysroot)
         .arg(bin)
         .args(args);
-    run(cmd, &format!("{QEMU} mpcc {args:?}"))
+    run(cmd, &format!("{} mpcc {args:?}", tools.qemu))
 }
 
 fn json(r: &Run, what: &str) -> Value {
