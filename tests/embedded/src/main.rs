@@ -119,20 +119,12 @@ fn stack_high_water() -> usize {
     top - p
 }
 
-/// The solver in a `static` (.bss), configured. Not inlined: the temporary that
-/// `singleton!` builds lives in this frame, which is gone before the loop starts.
-#[inline(never)]
-fn setup() -> &'static mut Solver {
-    let solver = cortex_m::singleton!(: Solver = Solver::unconfigured()).unwrap();
-    if solver.configure().is_err() {
-        hprintln!("configure failed");
-        debug::exit(debug::EXIT_FAILURE);
-    }
-    solver
-}
-
 #[entry]
 fn main() -> ! {
+    // The solver in a `static`, initialized from the `const` `Solver::unconfigured()`: its
+    // image is in .data (copied at reset), so no solver-sized temporary ever lives on the
+    // stack. cortex-m-rt hands `static mut`s of the entry function out as `&'static mut`.
+    static mut SOLVER: Solver = Solver::unconfigured();
     paint_stack();
     let mut cp = cortex_m::Peripherals::take().unwrap();
 
@@ -167,7 +159,11 @@ fn main() -> ! {
         dwt
     );
 
-    let solver = setup();
+    let solver: &'static mut Solver = SOLVER;
+    if solver.configure().is_err() {
+        hprintln!("configure failed");
+        debug::exit(debug::EXIT_FAILURE);
+    }
     hprintln!(
         "main: stack pointer {} B below the top",
         stack_bounds().1 - cortex_m::register::msp::read() as usize
