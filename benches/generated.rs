@@ -16,41 +16,7 @@ use std::hint::black_box;
 use std::time::{Duration, Instant};
 
 use criterion::{Criterion, criterion_group, criterion_main};
-
-const X0: [f64; 10] = [0.0, 0.0, 2.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
-
-fn ode(x: &[f64; 10], u: &[f64; 4]) -> [f64; 10] {
-    let (qw, qx, qy, qz) = (x[3], x[4], x[5], x[6]);
-    let (c, wx, wy, wz) = (u[0], u[1], u[2], u[3]);
-    [
-        x[7],
-        x[8],
-        x[9],
-        0.5 * (-qx * wx - qy * wy - qz * wz),
-        0.5 * (qw * wx + qy * wz - qz * wy),
-        0.5 * (qw * wy - qx * wz + qz * wx),
-        0.5 * (qw * wz + qx * wy - qy * wx),
-        2.0 * (qw * qy + qx * qz) * c,
-        2.0 * (qy * qz - qw * qx) * c,
-        (1.0 - 2.0 * (qx * qx + qy * qy)) * c - 9.81,
-    ]
-}
-
-fn plant(x: &[f64; 10], u: &[f64; 4], dt: f64) -> [f64; 10] {
-    let h = dt / 10.0;
-    let mut x = *x;
-    let axpy = |a: &[f64; 10], s: f64, b: &[f64; 10]| -> [f64; 10] {
-        core::array::from_fn(|i| a[i] + s * b[i])
-    };
-    for _ in 0..10 {
-        let k1 = ode(&x, u);
-        let k2 = ode(&axpy(&x, 0.5 * h, &k1), u);
-        let k3 = ode(&axpy(&x, 0.5 * h, &k2), u);
-        let k4 = ode(&axpy(&x, h, &k3), u);
-        x = core::array::from_fn(|i| x[i] + h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]));
-    }
-    x
-}
+use mpc_sim::qrbench::{X0, plant};
 
 /// Times one phase of the closed loop of solver crate `$m`; `$reset` builds a fresh solver
 /// and state, `$step` flies one step given the solver and the state (returns the new state).
@@ -103,7 +69,7 @@ macro_rules! qrbench {
         let steps = (4.0 / f64::from(m::DT)).round() as usize;
         let plant = |s: &m::Solver, x: &[m::Real; 10]| -> [m::Real; 10] {
             let u = s.u0().map(f64::from);
-            plant(&x.map(f64::from), &u, f64::from(m::DT)).map(|v| v as m::Real)
+            plant(&x.map(f64::from), &u, f64::from(m::DT), 10).map(|v| v as m::Real)
         };
         closed_loop_group!($c, $name, steps, new(), plant);
     }};

@@ -9,54 +9,12 @@ use std::time::Instant;
 
 use serde::Serialize;
 
+use mpc_sim::qrbench::{X0, plant};
+
 use crate::BenchArgs;
 
 /// Seconds flown in every round.
 const DURATION: f64 = 4.0;
-
-/// QR-bench's ODE (the anchors' formula), in f64.
-fn ode(x: &[f64; 10], u: &[f64; 4]) -> [f64; 10] {
-    let (qw, qx, qy, qz) = (x[3], x[4], x[5], x[6]);
-    let (c, wx, wy, wz) = (u[0], u[1], u[2], u[3]);
-    [
-        x[7],
-        x[8],
-        x[9],
-        0.5 * (-qx * wx - qy * wy - qz * wz),
-        0.5 * (qw * wx + qy * wz - qz * wy),
-        0.5 * (qw * wy - qx * wz + qz * wx),
-        0.5 * (qw * wz + qx * wy - qy * wx),
-        2.0 * (qw * qy + qx * qz) * c,
-        2.0 * (qy * qz - qw * qx) * c,
-        (1.0 - 2.0 * (qx * qx + qy * qy)) * c - 9.81,
-    ]
-}
-
-/// The plant: RK4 with `substeps` steps over `dt`, control held.
-pub(crate) fn plant(x: &[f64; 10], u: &[f64; 4], dt: f64, substeps: usize) -> [f64; 10] {
-    let h = dt / substeps as f64;
-    let mut x = *x;
-    let axpy = |a: &[f64; 10], s: f64, b: &[f64; 10]| -> [f64; 10] {
-        let mut o = *a;
-        for (oi, bi) in o.iter_mut().zip(b) {
-            *oi += s * bi;
-        }
-        o
-    };
-    for _ in 0..substeps {
-        let k1 = ode(&x, u);
-        let k2 = ode(&axpy(&x, 0.5 * h, &k1), u);
-        let k3 = ode(&axpy(&x, 0.5 * h, &k2), u);
-        let k4 = ode(&axpy(&x, h, &k3), u);
-        for i in 0..10 {
-            x[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
-        }
-    }
-    x
-}
-
-/// The initial state of QR-bench.
-pub(crate) const X0: [f64; 10] = [0.0, 0.0, 2.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
 
 /// One closed loop: the states (row k at t = k dt) and controls, and per-step figures.
 pub(crate) struct ClosedLoop {

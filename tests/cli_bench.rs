@@ -1,21 +1,11 @@
 //! `mpcc bench`: the QR-bench closed loop against the peers' closed loops (CasADi's converged
 //! SQP, acados' RTI), its JSON and its errors.
 
-use std::path::Path;
-use std::process::Command;
+mod common;
 
-fn mpcc(args: &[&str]) -> (Option<i32>, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_mpcc"))
-        .args(args)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .expect("the mpcc binary runs");
-    (
-        out.status.code(),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
-}
+use std::path::Path;
+
+use common::mpcc;
 
 /// Rows of a closed-loop CSV: the 10 states of each row.
 fn states(path: &Path) -> Vec<[f64; 10]> {

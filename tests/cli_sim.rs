@@ -1,20 +1,10 @@
 //! `mpcc sim`: the README's main command, its JSON summary, its files and its errors.
 
-use std::path::Path;
-use std::process::Command;
+mod common;
 
-fn mpcc(args: &[&str]) -> (Option<i32>, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_mpcc"))
-        .args(args)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .expect("the mpcc binary runs");
-    (
-        out.status.code(),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
-}
+use std::path::Path;
+
+use common::mpcc;
 
 fn num(v: &serde_json::Value, key: &str) -> f64 {
     v.get(key)

@@ -12,45 +12,16 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use quadrotor_rates_f32::{DT, NU, NX_MODEL, Real, RtiStatus, Solver};
+use quadrotor_rates_f32::{DT, NX_MODEL, Real, RtiStatus, Solver};
+
+#[path = "src/plant.rs"]
+mod plant;
+use plant::plant;
 
 const STEPS: usize = 100;
 const TARGET: &str = "thumbv7em-none-eabihf";
 const QEMU: &str = "qemu-system-arm";
 const QEMU_TIMEOUT: Duration = Duration::from_secs(120);
-
-/// The plant of `tests/embedded/src/main.rs` and `examples/build-rs` (keep them identical).
-fn plant(x: &[Real; NX_MODEL], u: &[Real; NU], dt: Real) -> [Real; NX_MODEL] {
-    let f = |x: &[Real; NX_MODEL]| -> [Real; NX_MODEL] {
-        let (qw, qx, qy, qz) = (x[3], x[4], x[5], x[6]);
-        let (c, wx, wy, wz) = (u[0], u[1], u[2], u[3]);
-        [
-            x[7],
-            x[8],
-            x[9],
-            0.5 * (-qx * wx - qy * wy - qz * wz),
-            0.5 * (qw * wx + qy * wz - qz * wy),
-            0.5 * (qw * wy - qx * wz + qz * wx),
-            0.5 * (qw * wz + qx * wy - qy * wx),
-            2.0 * (qw * qy + qx * qz) * c,
-            2.0 * (qy * qz - qw * qx) * c,
-            (1.0 - 2.0 * (qx * qx + qy * qy)) * c - 9.81,
-        ]
-    };
-    let axpy = |x: &[Real; NX_MODEL], k: &[Real; NX_MODEL], h: Real| {
-        core::array::from_fn(|i| x[i] + h * k[i])
-    };
-    let h = dt / 10.0;
-    let mut x = *x;
-    for _ in 0..10 {
-        let k1 = f(&x);
-        let k2 = f(&axpy(&x, &k1, h / 2.0));
-        let k3 = f(&axpy(&x, &k2, h / 2.0));
-        let k4 = f(&axpy(&x, &k3, h));
-        x = core::array::from_fn(|i| x[i] + h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]));
-    }
-    x
-}
 
 /// The closed loop on the host: final state and QP iterations per step.
 fn host_run() -> ([Real; NX_MODEL], Vec<u32>) {

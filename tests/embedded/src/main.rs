@@ -21,7 +21,10 @@ use cortex_m::peripheral::syst::SystClkSource;
 use cortex_m_rt::{ExceptionFrame, entry, exception};
 use cortex_m_semihosting::{debug, hprintln};
 use panic_semihosting as _;
-use quadrotor_rates_f32::{DT, NU, NX_MODEL, Real, RtiStatus, Solver};
+use quadrotor_rates_f32::{DT, NX_MODEL, Real, RtiStatus, Solver};
+
+mod plant;
+use plant::plant;
 
 /// Instructions per SysTick tick: 1 ns per instruction (icount shift=0) at 25 MHz.
 const INSNS_PER_TICK: u32 = 40;
@@ -31,40 +34,6 @@ const STEPS: usize = 100;
 const PAINT: u32 = 0xDEAD_BEEF;
 /// Words left unpainted below the painting function's stack pointer.
 const PAINT_MARGIN: usize = 256;
-
-/// The plant: the same rate model, 10 RK4 substeps per control interval (verbatim
-/// `examples/build-rs/src/main.rs`).
-fn plant(x: &[Real; NX_MODEL], u: &[Real; NU], dt: Real) -> [Real; NX_MODEL] {
-    let f = |x: &[Real; NX_MODEL]| -> [Real; NX_MODEL] {
-        let (qw, qx, qy, qz) = (x[3], x[4], x[5], x[6]);
-        let (c, wx, wy, wz) = (u[0], u[1], u[2], u[3]);
-        [
-            x[7],
-            x[8],
-            x[9],
-            0.5 * (-qx * wx - qy * wy - qz * wz),
-            0.5 * (qw * wx + qy * wz - qz * wy),
-            0.5 * (qw * wy - qx * wz + qz * wx),
-            0.5 * (qw * wz + qx * wy - qy * wx),
-            2.0 * (qw * qy + qx * qz) * c,
-            2.0 * (qy * qz - qw * qx) * c,
-            (1.0 - 2.0 * (qx * qx + qy * qy)) * c - 9.81,
-        ]
-    };
-    let axpy = |x: &[Real; NX_MODEL], k: &[Real; NX_MODEL], h: Real| {
-        core::array::from_fn(|i| x[i] + h * k[i])
-    };
-    let h = dt / 10.0;
-    let mut x = *x;
-    for _ in 0..10 {
-        let k1 = f(&x);
-        let k2 = f(&axpy(&x, &k1, h / 2.0));
-        let k3 = f(&axpy(&x, &k2, h / 2.0));
-        let k4 = f(&axpy(&x, &k3, h));
-        x = core::array::from_fn(|i| x[i] + h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]));
-    }
-    x
-}
 
 /// SysTick ticks elapsed since `start` (the counter counts down, 24 bits).
 fn ticks_since(start: u32) -> u32 {
