@@ -602,9 +602,13 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
                     if !(#finite) {
                         return Err(SetError::NonFinite);
                     }
-                    let mut p = self.p[0];
-                    #copy
-                    self.set_param_all(&p.into())
+                    // Only this parameter's entries change; per-stage ones are kept.
+                    for k in 0..=N {
+                        let mut p = self.p[k];
+                        #copy
+                        self.set_param(k, &p.into())?;
+                    }
+                    Ok(())
                 }
             });
         }
@@ -663,9 +667,11 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
                     // The control just returned is the one applied next: it becomes
                     // `u_{-1}` of the input-rate cost of the next step.
                     if u.iter().all(|e| e.is_finite()) {
-                        let mut p = self.p[0];
-                        #(#upd)*
-                        let _ = self.set_param_all(&p.into());
+                        for k in 0..=N {
+                            let mut p = self.p[k];
+                            #(#upd)*
+                            let _ = self.set_param(k, &p.into());
+                        }
                     }
                 },
                 quote!(#(#g)*),
