@@ -8,6 +8,7 @@ use clap::{Parser, Subcommand};
 
 mod bench;
 mod sim;
+mod throw;
 use mpc_dsl::lang::{ParseOptions, parse};
 use mpc_dsl::ocp::{Dynamics, Integrator, Ocp, ParamKind, Variable};
 use mpc_dsl::{Expr, ExprKind, Graph, Sparsity};
@@ -71,12 +72,24 @@ struct BenchArgs {
 
 #[derive(clap::Args)]
 struct SimArgs {
-    /// Mission: flip (the paper's), hover, step (flip-throw: issue 8, not yet available).
+    /// Mission: flip (the paper's), hover, step, or flip-throw (throw the tethered probe to
+    /// a target --range metres away during a pitch-over, recover, return, land).
     #[arg(long, default_value = "flip")]
     mission: String,
-    /// Outer loop: paper (point-mass MPC + geometric attitude) or nmpc (quaternion NMPC).
-    #[arg(long, default_value = "paper")]
-    controller: String,
+    /// Outer loop: paper (point-mass MPC + geometric attitude; the default) or nmpc
+    /// (quaternion NMPC). flip-throw always flies the swing-aware probe NMPC.
+    #[arg(long)]
+    controller: Option<String>,
+    /// flip-throw: range from the probe's start to the target [m]; a list (5,10,15,20,25)
+    /// flies each and prints one table.
+    #[arg(long, value_name = "M[,M...]")]
+    range: Option<String>,
+    /// flip-throw: upper bound of the release speed [m/s] (default 16).
+    #[arg(long, value_name = "M_S")]
+    v_max: Option<f64>,
+    /// flip-throw: quadratic air drag of the free probe [N/(m/s)^2] (default 0: none).
+    #[arg(long, value_name = "C")]
+    probe_drag: Option<f64>,
     /// Number of trials (seeds S, S+1, ...).
     #[arg(long, default_value_t = 1)]
     trials: usize,

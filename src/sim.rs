@@ -17,7 +17,7 @@ use mpc_sim::run::{SimConfig, TrialResult, run_trial};
 use crate::SimArgs;
 
 /// The generated solvers the simulator links, with the model each comes from.
-const SOLVERS: [(&str, &str, &str); 2] = [
+const SOLVERS: [(&str, &str, &str); 3] = [
     (
         "paper",
         "models/paper_pointmass.mpc",
@@ -28,11 +28,16 @@ const SOLVERS: [(&str, &str, &str); 2] = [
         "models/quadrotor_rates.mpc",
         "generated/quadrotor_rates",
     ),
+    (
+        "probe",
+        "models/quadrotor_probe.mpc",
+        "generated/quadrotor_probe",
+    ),
 ];
 
 /// Regenerates the controller's solver from its model and compares it with the crate the
 /// simulator is built with: a stale crate would fly another controller than the model says.
-fn check_solver(controller: &str, quiet: bool) -> Result<(), String> {
+pub(crate) fn check_solver(controller: &str, quiet: bool) -> Result<(), String> {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let Some((_, model, dir)) = SOLVERS.iter().find(|s| s.0 == controller) else {
         return Ok(());
@@ -113,22 +118,30 @@ fn parse(args: &SimArgs) -> Result<(MissionKind, ControllerKind), String> {
         "flip" => MissionKind::Flip,
         "hover" => MissionKind::Hover,
         "step" => MissionKind::Step,
-        "flip-throw" => {
-            return Err(
-                "--mission flip-throw: not available yet (the probe and the release \
-                        planner are the next step); fly --mission flip, hover or step"
-                    .to_string(),
-            );
+        m => {
+            return Err(format!(
+                "--mission {m}: unknown; use flip, hover, step or flip-throw"
+            ));
         }
-        m => return Err(format!("--mission {m}: unknown; use flip, hover or step")),
     };
-    let controller = match args.controller.as_str() {
+    let controller = match args.controller.as_deref().unwrap_or("paper") {
         "paper" => ControllerKind::Paper,
         "nmpc" => ControllerKind::Nmpc,
         c => return Err(format!("--controller {c}: unknown; use paper or nmpc")),
     };
     if args.trials == 0 {
         return Err("--trials 0: fly at least one trial".to_string());
+    }
+    for (set, flag) in [
+        (args.range.is_some(), "--range"),
+        (args.v_max.is_some(), "--v-max"),
+        (args.probe_drag.is_some(), "--probe-drag"),
+    ] {
+        if set {
+            return Err(format!(
+                "{flag} is a flip-throw setting (--mission flip-throw)"
+            ));
+        }
     }
     if let Some(m) = args.mass
         && !(m.is_finite() && m > 0.0)
@@ -159,6 +172,9 @@ fn flip_start(cfg: &SimConfig) -> Option<f64> {
 }
 
 pub(crate) fn run(args: &SimArgs) -> ExitCode {
+    if args.mission == "flip-throw" {
+        return crate::throw::run(args);
+    }
     let (_, controller, mission_cfg) =
         match parse(args).and_then(|(m, c)| Ok((m, c, mission_config(args, m)?))) {
             Ok(v) => v,

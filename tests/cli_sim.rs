@@ -102,8 +102,12 @@ fn bad_arguments_are_refused_with_a_reason() {
         ),
         (vec!["sim", "--trials", "0"], "at least one trial"),
         (
-            vec!["sim", "--mission", "flip-throw"],
-            "flip-throw: not available yet",
+            vec!["sim", "--mission", "flip-throw", "--range=-3"],
+            "--range -3: give positive distances",
+        ),
+        (
+            vec!["sim", "--mission", "flip-throw", "--pose-loss", "0.1"],
+            "--pose-loss is not a flip-throw setting",
         ),
         (vec!["sim", "--pose-loss=-1"], "--pose-loss -1"),
         (
@@ -169,4 +173,71 @@ fn mission_options_move_the_rally_point() {
     }
     assert!(held, "no hold phase in the log");
     assert_eq!(rate, 12.0);
+}
+
+#[test]
+fn flip_throw_reports_the_landing_points_and_draws_the_side_view() {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("cli_sim_throw");
+    let _ = std::fs::remove_dir_all(&dir);
+    let (code, out, err) = mpcc(&[
+        "sim",
+        "--mission",
+        "flip-throw",
+        "--range",
+        "20",
+        "--trials",
+        "2",
+        "--json",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert_eq!(code, Some(0), "{out}\n{err}");
+    let v: serde_json::Value = serde_json::from_str(out.trim()).expect("one JSON object");
+    assert_eq!(v["mission"], "flip-throw");
+    assert_eq!(v["success"], true);
+    assert_eq!(num(&v, "range_m"), 20.0);
+    let xs = v["probe_landing_x_m"].as_array().unwrap();
+    assert_eq!(xs.len(), 2);
+    for x in xs {
+        let x = x.as_f64().unwrap();
+        assert!((x - 20.0).abs() < 0.5, "{x}");
+    }
+    let errs = &v["probe_landing_error_m"];
+    assert_eq!(errs["per_trial"].as_array().unwrap().len(), 2);
+    assert!(num(errs, "worst") < 0.5);
+    for key in ["release_speed_m_s", "release_angle_rad"] {
+        let a = v[key].as_array().unwrap();
+        assert_eq!(a.len(), 2, "{key}");
+        assert!(
+            a.iter().all(|e| e.as_f64().is_some_and(f64::is_finite)),
+            "{key}"
+        );
+    }
+    for f in ["probe", "position", "rates", "thrust", "solver_time"] {
+        let png = std::fs::read(dir.join(format!("flip-throw_20m_{f}.png"))).unwrap();
+        assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n", "{f}");
+        assert!(png.len() > 20_000, "{f}.png is nearly empty");
+    }
+    assert!(dir.join("flip-throw_20m.csv").is_file());
+}
+
+#[test]
+fn flip_throw_says_when_a_range_is_out_of_reach() {
+    let (code, out, err) = mpcc(&[
+        "sim",
+        "--mission",
+        "flip-throw",
+        "--range",
+        "45",
+        "--no-plots",
+    ]);
+    assert_eq!(code, Some(1), "{out}\n{err}");
+    assert!(out.contains("unreachable"), "{out}");
+    assert!(out.contains("maximum range"), "{out}");
+    let (code, _, err) = mpcc(&["sim", "--mission", "flip-throw", "--controller", "paper"]);
+    assert_eq!(code, Some(2));
+    assert!(err.contains("--controller"), "{err}");
+    let (code, _, err) = mpcc(&["sim", "--range", "20"]);
+    assert_eq!(code, Some(2));
+    assert!(err.contains("flip-throw"), "{err}");
 }

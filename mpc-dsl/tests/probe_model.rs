@@ -2,6 +2,11 @@
 //! the Lagrange equations (nalgebra), the Euler-Lagrange residual of the Lagrangian built
 //! with the symbolic AD, energy conservation in free swing, the hanging equilibrium, and
 //! mp = 0 reducing to QR-bench.
+//!
+//! The model's actuator lags (states `wb`, `ct` behind the setpoints `w`, `c`) are checked
+//! apart: the other 14 derivatives, evaluated with the lag states equal to a control vector
+//! `u = (c, w)`, are those of the lag-free model with `u` as its input, and the lag
+//! derivatives are first order with the parameters `tau_w`, `tau_c`.
 
 use mpc_dsl::lang::{ParseOptions, parse};
 use mpc_dsl::ocp::Ocp;
@@ -33,20 +38,65 @@ fn model(g: &Graph) -> Ocp<'_> {
     }
 }
 
-/// f(x, u, [mq, mp]) as a program over (x, u, mq, mp).
+/// Number of states of the lag-free model (p, q, v, ang, dang); the lag states wb (14..17)
+/// and ct (17) follow.
+const NX0: usize = 14;
+/// Defaults of the lag time constants in the model file.
+const TAU_W: f64 = 0.04;
+const TAU_C: f64 = 0.03;
+
+/// f(x, u, [mq, mp, tau_w, tau_c]) as a program over (x, u, mq, mp, tau_w, tau_c).
 fn program(g: &Graph, ocp: &Ocp<'_>) -> Program {
     let mut inputs: Vec<Expr<'_>> = ocp.x().to_vec();
     inputs.extend(ocp.u().iter().copied());
-    inputs.push(ocp.variable("mq").unwrap().symbols[0]);
-    inputs.push(ocp.variable("mp").unwrap().symbols[0]);
+    for name in ["mq", "mp", "tau_w", "tau_c"] {
+        inputs.push(ocp.variable(name).unwrap().symbols[0]);
+    }
     g.compile(ocp.dynamics_exprs(), &inputs).unwrap()
 }
 
-fn f(prog: &Program, x: &[f64], u: &[f64], mq: f64, mp: f64) -> Vec<f64> {
+/// All 18 derivatives of the model at the full state `x` (lag states included).
+#[allow(clippy::too_many_arguments)]
+fn f_full(
+    prog: &Program,
+    x: &[f64],
+    u: &[f64],
+    mq: f64,
+    mp: f64,
+    tau_w: f64,
+    tau_c: f64,
+) -> Vec<f64> {
+    assert_eq!((x.len(), u.len()), (NX0 + 4, 4));
     let mut input = x.to_vec();
     input.extend_from_slice(u);
-    input.extend_from_slice(&[mq, mp]);
+    input.extend_from_slice(&[mq, mp, tau_w, tau_c]);
     prog.eval(&input).unwrap()
+}
+
+/// The lag-free model seen through the lags: the 14 derivatives of (p, q, v, ang, dang) at
+/// the state `x` (14 entries) extended with delivered rates wb = u[1..4] and thrust ct = u[0].
+/// They must not depend on the setpoints or the time constants (only on what is delivered):
+/// evaluated again with other setpoints and other tau, they are bit for bit the same; and
+/// with the setpoints equal to the delivered values the lag states are at rest.
+fn f(prog: &Program, x: &[f64], u: &[f64], mq: f64, mp: f64) -> Vec<f64> {
+    assert_eq!((x.len(), u.len()), (NX0, 4));
+    let mut xl = x.to_vec();
+    xl.extend_from_slice(&u[1..4]);
+    xl.push(u[0]);
+    let d = f_full(prog, &xl, u, mq, mp, TAU_W, TAU_C);
+    assert!(
+        d[NX0..].iter().all(|v| *v == 0.0),
+        "setpoints = delivered values: the lags rest, {:?}",
+        &d[NX0..]
+    );
+    let other_setpoints = [u[0] + 1.7, u[1] - 0.9, u[2] + 0.4, u[3] - 1.3];
+    let d2 = f_full(prog, &xl, &other_setpoints, mq, mp, 0.11, 0.07);
+    assert_eq!(
+        &d[..NX0],
+        &d2[..NX0],
+        "the vehicle and swing derivatives depend on the setpoints or tau"
+    );
+    d[..NX0].to_vec()
 }
 
 /// Link direction and its derivatives, hand-written.
@@ -118,7 +168,12 @@ fn random_state(rng: &mut Rng) -> Vec<f64> {
 fn probe_model_matches_the_mass_matrix_solve() {
     let g = Graph::new();
     let ocp = model(&g);
-    assert_eq!((ocp.nx(), ocp.nu(), ocp.np()), (14, 4, 20));
+    // Parameters: mq, mp, tau_w, tau_c (1 each), q_w[18], p_w[18], r_w[4], vthrow[3],
+    // w_throw, z_floor (1 each); stage: xref[18], uref[4].
+    assert_eq!(
+        (ocp.nx(), ocp.nu(), ocp.np()),
+        (18, 4, 4 + 18 + 18 + 4 + 3 + 2 + 18 + 4)
+    );
     let prog = program(&g, &ocp);
     let mut rng = Rng(0xdead_beef);
     for _ in 0..200 {
@@ -343,12 +398,100 @@ fn without_the_probe_it_is_qr_bench() {
     }
 }
 
+/// `0.5 q ⊗ (0, w)`, the Hamilton product written out.
+fn quat_kinematics(q: &[f64], w: &[f64]) -> [f64; 4] {
+    let (a, b, c, d) = (q[0], q[1], q[2], q[3]);
+    [
+        0.5 * (-b * w[0] - c * w[1] - d * w[2]),
+        0.5 * (a * w[0] + c * w[2] - d * w[1]),
+        0.5 * (a * w[1] - b * w[2] + d * w[0]),
+        0.5 * (a * w[2] + b * w[1] - c * w[0]),
+    ]
+}
+
+/// The lag states: der(wb) = (w - wb)/tau_w and der(ct) = (c - ct)/tau_c at random points
+/// (random tau, setpoints and delivered values apart); the attitude turns with the delivered
+/// rates wb and the vehicle accelerates with the delivered thrust ct, not the setpoints; with
+/// mp = 0 the swing is frozen (der(dang) = 0) and with mp = 0.2 der(dang) is the mass-matrix
+/// solve's (the `live` factor is 1 - 5e-12 there).
+#[test]
+fn lags_are_first_order_and_the_swing_freezes_without_probe() {
+    let g = Graph::new();
+    let ocp = model(&g);
+    let prog = program(&g, &ocp);
+    let mut rng = Rng(0x1a95);
+    for _ in 0..200 {
+        let mut x = random_state(&mut rng);
+        let wb = [
+            rng.uniform(-4.0, 4.0),
+            rng.uniform(-4.0, 4.0),
+            rng.uniform(-2.0, 2.0),
+        ];
+        let ct = rng.uniform(0.0, 25.0);
+        x.extend_from_slice(&wb);
+        x.push(ct);
+        let u = [
+            rng.uniform(0.0, 30.0),
+            rng.uniform(-6.0, 6.0),
+            rng.uniform(-6.0, 6.0),
+            rng.uniform(-3.0, 3.0),
+        ];
+        let (tau_w, tau_c) = (rng.uniform(0.01, 0.3), rng.uniform(0.01, 0.3));
+        let mq = rng.uniform(0.5, 3.0);
+        let delivered = [ct, wb[0], wb[1], wb[2]];
+        for mp in [0.2, 0.0] {
+            let d = f_full(&prog, &x, &u, mq, mp, tau_w, tau_c);
+            for i in 0..3 {
+                let want = (u[1 + i] - wb[i]) / tau_w;
+                assert!(
+                    (d[NX0 + i] - want).abs() <= 1e-14 * want.abs().max(1.0),
+                    "der(wb[{i}]) = {} vs {want}",
+                    d[NX0 + i]
+                );
+            }
+            let want = (u[0] - ct) / tau_c;
+            assert!(
+                (d[NX0 + 3] - want).abs() <= 1e-14 * want.abs().max(1.0),
+                "der(ct) = {} vs {want}",
+                d[NX0 + 3]
+            );
+            let qd = quat_kinematics(&x[3..7], &wb);
+            for i in 0..4 {
+                assert!(
+                    (d[3 + i] - qd[i]).abs() <= 1e-14 * (1.0 + qd[i].abs()),
+                    "der(q) with wb: {:?} vs {qd:?}",
+                    &d[3..7]
+                );
+            }
+            assert_eq!(&d[0..3], &x[7..10], "der(p) = v");
+            assert_eq!(&d[10..12], &x[12..14], "der(ang) = dang");
+            if mp == 0.0 {
+                assert_eq!(&d[12..14], &[0.0, 0.0], "frozen swing without the probe");
+                let acc = body_z(&x[3..7]) * ct - Vector3::z() * G;
+                for i in 0..3 {
+                    assert!((d[7 + i] - acc[i]).abs() < 1e-12 * (1.0 + acc[i].abs()));
+                }
+            } else {
+                let (acc, th) = lagrange_reference(&x, &delivered, mq, mp);
+                let want = [acc.x, acc.y, acc.z, th[0], th[1]];
+                let got = [d[7], d[8], d[9], d[12], d[13]];
+                for (a, b) in got.iter().zip(&want) {
+                    assert!(
+                        (a - b).abs() <= 1e-9 * (1.0 + b.abs()),
+                        "{got:?} vs {want:?}"
+                    );
+                }
+            }
+        }
+    }
+}
+
 /// The probe model through the Rust builder, operation for operation as in the file.
 fn probe_builder(g: &Graph) -> Ocp<'_> {
-    use mpc_dsl::linalg::{Matrix, Vector, dot, quat_mul, quat_rotate};
+    use mpc_dsl::linalg::{Matrix, dot, quat_mul, quat_rotate};
     use mpc_dsl::ocp::{Decl, Integrator, Slack, Stage};
     let mut b = Ocp::builder(g, "quadrotor_probe");
-    b.state(
+    let p = b.state(
         Decl::vector("p", 3)
             .unit("m")
             .describe("vehicle position, world frame, z up"),
@@ -373,15 +516,26 @@ fn probe_builder(g: &Graph) -> Ocp<'_> {
             .unit("rad/s")
             .describe("swing rates"),
     );
+    let wb = b.state(
+        Decl::vector("wb", 3)
+            .unit("rad/s")
+            .describe("body rates as the rate loop delivers them (first-order lag behind w)"),
+    );
+    let ct = b.state(
+        Decl::scalar("ct")
+            .unit("m/s^2")
+            .describe("collective thrust as the rotors deliver it (first-order lag behind c)")
+            .start(&[9.81]),
+    )[0];
     let c = b.control(
         Decl::scalar("c")
             .unit("m/s^2")
-            .describe("collective thrust normalized by the total mass mq + mp"),
+            .describe("collective thrust setpoint, normalized by the total mass mq + mp"),
     );
     let w = b.control(
         Decl::vector("w", 3)
             .unit("rad/s")
-            .describe("body rates (x, y, z)"),
+            .describe("body-rate setpoint (x, y, z) for the rate loop"),
     );
     let mq = b.global_param(
         Decl::scalar("mq")
@@ -395,11 +549,54 @@ fn probe_builder(g: &Graph) -> Ocp<'_> {
             .describe("probe mass (0 after release)")
             .start(&[0.2]),
     )[0];
+    let tau_w = b.global_param(
+        Decl::scalar("tau_w")
+            .unit("s")
+            .describe("time constant of the rate loop's response")
+            .start(&[0.04]),
+    )[0];
+    let tau_c = b.global_param(
+        Decl::scalar("tau_c")
+            .unit("s")
+            .describe("time constant of the rotors' thrust response")
+            .start(&[0.03]),
+    )[0];
+    let q_w = b.global_param(Decl::vector("q_w", 18).describe("diagonal of Q").start(&[
+        100.0, 100.0, 100.0, 10.0, 10.0, 10.0, 10.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.1, 0.1, 0.0, 0.0,
+        0.0, 0.0,
+    ]));
+    let p_w = b.global_param(Decl::vector("p_w", 18).describe("diagonal of P").start(&[
+        500.0, 500.0, 500.0, 50.0, 50.0, 50.0, 50.0, 5.0, 5.0, 5.0, 5.0, 5.0, 0.5, 0.5, 0.0, 0.0,
+        0.0, 0.0,
+    ]));
+    let r_w = b.global_param(
+        Decl::vector("r_w", 4)
+            .describe("diagonal of R")
+            .start(&[0.5, 1.0, 1.0, 1.0]),
+    );
+    let vthrow = b.global_param(
+        Decl::vector("vthrow", 3)
+            .unit("m/s")
+            .describe("probe velocity wanted at the end of the horizon (throw planning)")
+            .start(&[0.0, 0.0, 0.0]),
+    );
+    let w_throw = b.global_param(
+        Decl::scalar("w_throw")
+            .describe("weight of the terminal probe-velocity residual (0: tracking)")
+            .start(&[0.0]),
+    )[0];
+    let z_floor = b.global_param(
+        Decl::scalar("z_floor")
+            .unit("m")
+            .describe("soft floor on the vehicle's height (lower it to land)")
+            .start(&[1.0]),
+    )[0];
     let xref = b.stage_param(
-        Decl::vector("xref", 14)
+        Decl::vector("xref", 18)
             .describe("state reference")
             .start(&[
-                4.0, 0.0, 2.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+                4.0, 0.0, 2.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+                0.0, 9.81,
             ]),
     );
     let uref = b.stage_param(
@@ -414,7 +611,7 @@ fn probe_builder(g: &Graph) -> Ocp<'_> {
     let na = [ca * cb, z, sa * cb];
     let nb = [-sa * sb, cb, ca * sb];
     let ndot2 = cb.powi(2) * dang[0].powi(2) + dang[1].powi(2);
-    let thrust: Vec<Expr<'_>> = quat_rotate(&q, &[z, z, c[0]])
+    let thrust: Vec<Expr<'_>> = quat_rotate(&q, &[z, z, ct])
         .unwrap()
         .iter()
         .map(|&e| m * e)
@@ -429,32 +626,40 @@ fn probe_builder(g: &Graph) -> Ocp<'_> {
     let s = mp / m * dot(&n, &bv).unwrap();
     let acc: Vec<Expr<'_>> = (0..3).map(|i| (bv[i] - s * n[i]) / mq).collect();
     let gacc = [acc[0], acc[1], acc[2] + G];
+    let live = mp / (mp + 1e-12);
     let dd = [
-        -dot(&na, &gacc).unwrap() / (L * cb.powi(2)) + 2.0 * sb / cb * dang[0] * dang[1],
-        -dot(&nb, &gacc).unwrap() / L - sb * cb * dang[0].powi(2),
+        live * (-dot(&na, &gacc).unwrap() / (L * cb.powi(2)) + 2.0 * sb / cb * dang[0] * dang[1]),
+        live * (-dot(&nb, &gacc).unwrap() / L - sb * cb * dang[0].powi(2)),
     ];
-    let qd = quat_mul(&q, &[z, w[0], w[1], w[2]]).unwrap().scale(0.5);
+    let qd = quat_mul(&q, &[z, wb[0], wb[1], wb[2]]).unwrap().scale(0.5);
+    let dwb: Vec<Expr<'_>> = (0..3).map(|i| (w[i] - wb[i]) / tau_w).collect();
+    let dct = (c[0] - ct) / tau_c;
     let xdot: Vec<Expr<'_>> = v
         .iter()
         .chain(qd.iter())
         .chain(&acc)
         .chain(dang.iter())
         .chain(&dd)
+        .chain(&dwb)
+        .chain(&[dct])
         .copied()
         .collect();
-    b.ode(&xdot, Integrator::Rk4 { steps: 1 });
+    b.ode(&xdot, Integrator::Rk4 { steps: 2 });
     b.horizon(20, 0.05);
-    let qdiag = [
-        100.0, 100.0, 100.0, 10.0, 10.0, 10.0, 10.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.1, 0.1,
-    ];
-    let qw = Matrix::diag(g, &Vector::constants(g, &qdiag));
-    b.state_cost(qw.clone(), &xref);
-    b.control_cost(
-        Matrix::diag(g, &Vector::constants(g, &[0.5, 1.0, 1.0, 1.0])),
-        &uref,
+    let vprobe: Vec<Expr<'_>> = (0..3)
+        .map(|i| v[i] + L * (na[i] * dang[0] + nb[i] * dang[1]))
+        .collect();
+    let throw: Vec<Expr<'_>> = (0..3).map(|i| vprobe[i] - vthrow[i]).collect();
+    b.state_cost(Matrix::diag(g, &q_w), &xref);
+    b.control_cost(Matrix::diag(g, &r_w), &uref);
+    b.terminal_cost(Matrix::diag(g, &p_w), &xref);
+    b.residual(
+        "throw",
+        Stage::Terminal,
+        &throw,
+        Matrix::identity(g, 3).scale(w_throw),
     );
-    b.terminal_cost(qw.scale(5.0), &xref);
-    b.bound(&c, 0.0, 20.0);
+    b.bound(&c, 0.0, 30.0);
     b.bound(&w[0..2], -20.0, 20.0);
     b.bound(&w[2..3], -6.0, 6.0);
     b.soft_constraint(
@@ -466,6 +671,17 @@ fn probe_builder(g: &Graph) -> Ocp<'_> {
         Slack {
             l1: 100.0,
             l2: 100.0,
+        },
+    );
+    b.soft_constraint(
+        "floor",
+        Stage::Path,
+        &[p[2] - z_floor],
+        &[0.0],
+        &[f64::INFINITY],
+        Slack {
+            l1: 100.0,
+            l2: 1000.0,
         },
     );
     b.build().unwrap()

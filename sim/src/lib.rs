@@ -15,10 +15,13 @@ pub mod log;
 pub mod mission;
 pub mod plant;
 pub mod plot;
+pub mod probe;
 pub mod qrbench;
 pub mod rate_loop;
+pub mod release;
 pub mod report;
 pub mod run;
+pub mod throw;
 
 /// The linear-algebra crate of this crate's API (positions, quaternions).
 pub use nalgebra;

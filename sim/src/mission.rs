@@ -314,6 +314,23 @@ pub enum Segment {
     },
 }
 
+impl Segment {
+    /// The reference `tau` seconds into this segment, labelled `phase`, with heading `yaw`.
+    pub fn reference(&self, phase: Phase, yaw: f64, tau: f64) -> RefPoint {
+        let (p, v, a, attitude, rate, thrust) = eval_segment(self, tau);
+        RefPoint {
+            phase,
+            p,
+            v,
+            a,
+            yaw,
+            attitude,
+            rate,
+            thrust,
+        }
+    }
+}
+
 /// One axis of a quintic: `start` and `end` are (position, velocity, acceleration), `t` the
 /// time into it, `tt` its duration.
 fn quintic_1d(start: [f64; 3], end: [f64; 3], t: f64, tt: f64) -> [f64; 3] {

@@ -38,8 +38,23 @@
 //! ground from then on. A crash freezes the plant: further [`Plant::step`] calls do nothing
 //! and return the same crash. Any non-finite input or state is a crash
 //! ([`CrashReason::NonFinite`]); the state is never left non-finite.
+//!
+//! # Tethered probe
+//!
+//! A probe ([`crate::probe`]) can hang from the centre of gravity on a rigid link
+//! ([`Plant::attach_probe`]). While attached, its two swing angles and rates are integrated
+//! with the vehicle in the same RK4 step (21 states) and the link tension `lambda n` acts on
+//! the vehicle: `v' = (F + lambda n) / m - g e_z` with `F` the force above, and the
+//! accelerometer ([`Plant::specific_acceleration`]) measures `(F + lambda n) / m`. The
+//! attitude, rate and rotor dynamics are unchanged (free pivot). Lift-off needs the total
+//! weight `(m + mp) g`; while the vehicle is held on the ground the swing angles are held and
+//! the swing rates are zero. After [`Plant::release_probe`] the probe flies ballistically,
+//! independent of the vehicle, and lands on `z = 0`. With a probe of zero mass (or none) the
+//! vehicle's motion is bit-identical to the plant without a probe.
 
 use nalgebra::{Quaternion, SVector, UnitQuaternion, Vector3};
+
+use crate::probe::{CoupledAcceleration, Probe, ProbeParams, Release, coupled_acceleration};
 
 /// Touchdown vertical speed (m/s, downward) above which an impact is a crash.
 pub const MAX_TOUCHDOWN_VERTICAL_SPEED: f64 = 1.5;
@@ -284,6 +299,8 @@ enum Mode {
 }
 
 type Vec17 = SVector<f64, 17>;
+/// The vehicle's 17 states followed by `alpha, beta, alpha', beta'` of an attached probe.
+type Vec21 = SVector<f64, 21>;
 
 /// The simulated quadrotor.
 #[derive(Clone, Debug)]
@@ -295,6 +312,7 @@ pub struct Plant {
     last: Contact,
     time: f64,
     last_dist: Disturbance,
+    probe: Option<Probe>,
 }
 
 impl Plant {
@@ -309,6 +327,7 @@ impl Plant {
             last: Contact::Airborne,
             time: 0.0,
             last_dist: Disturbance::default(),
+            probe: None,
         };
         plant.set_state(state);
         plant
@@ -320,7 +339,8 @@ impl Plant {
     }
 
     /// Replaces the state (clearing any crash), with the same ground rule as [`Plant::new`].
-    /// A non-finite state is a [`CrashReason::NonFinite`] crash.
+    /// A non-finite state is a [`CrashReason::NonFinite`] crash. An attached probe keeps its
+    /// swing angles (and rates, unless the new state is on the ground).
     pub fn set_state(&mut self, s: QuadState) {
         if !s.is_finite() {
             let c = Contact::Crash {
@@ -342,9 +362,108 @@ impl Plant {
             self.state.w = Vector3::zeros();
             self.mode = Mode::OnGround;
             self.last = Contact::OnGround;
+            self.hold_probe();
         } else {
             self.mode = Mode::Airborne;
             self.last = Contact::Airborne;
+        }
+    }
+
+    /// Attaches a probe with parameters `params` at swing angles `ang` (rad) and rates
+    /// `dang` (rad/s), replacing any probe (attached, free or landed). Its
+    /// [`Probe::start`] is its position now. On the ground the swing rates are set to zero
+    /// (the probe is held with the vehicle).
+    ///
+    /// Invalid parameters (see [`ProbeParams::is_valid`]) or non-finite angles or rates
+    /// remove the probe and are a [`CrashReason::NonFinite`] crash (unless the plant has
+    /// already crashed).
+    pub fn attach_probe(&mut self, params: ProbeParams, ang: [f64; 2], dang: [f64; 2]) {
+        let finite = ang.iter().chain(dang.iter()).all(|x| x.is_finite());
+        if !params.is_valid() || !finite {
+            self.probe = None;
+            if self.crashed().is_none() {
+                let at = self.state.clone();
+                self.crash(CrashReason::NonFinite, &at);
+            }
+            return;
+        }
+        self.probe = Some(Probe::attached(params, ang, dang, &self.state, self.time));
+        if self.mode == Mode::OnGround {
+            self.hold_probe();
+        }
+    }
+
+    /// The probe, if one was attached (in any phase).
+    pub fn probe(&self) -> Option<&Probe> {
+        self.probe.as_ref()
+    }
+
+    /// Releases the attached probe: it becomes [`crate::probe::ProbePhase::Free`] with its
+    /// current position and velocity, and the link force on the vehicle disappears (the
+    /// vehicle's velocity is unchanged at this instant). Returns the release record, or
+    /// `None` if no probe is attached.
+    pub fn release_probe(&mut self) -> Option<Release> {
+        let (state, time) = (&self.state, self.time);
+        self.probe.as_mut().and_then(|p| p.release_at(state, time))
+    }
+
+    /// Mass carried by the thrust, kg: the vehicle's plus an attached probe's.
+    pub fn total_mass(&self) -> f64 {
+        self.params.mass + self.attached_probe().map_or(0.0, |p| p.params().mass)
+    }
+
+    /// Link tension `lambda` (N) at the current state with the last step's disturbance, if a
+    /// probe is attached and the vehicle airborne (see [`crate::probe::CoupledAcceleration`]).
+    pub fn link_tension(&self) -> Option<f64> {
+        if self.mode != Mode::Airborne {
+            return None;
+        }
+        self.attached_probe().map(|p| {
+            let f = self.nongravity_force(&self.state, &self.last_dist);
+            self.coupled(&f, p.params(), p.ang(), p.dang()).tension
+        })
+    }
+
+    /// The airborne accelerations at the current state under the disturbance `dist`: the
+    /// vehicle's world acceleration `v'` and, with an attached probe, the swing
+    /// accelerations `(alpha'', beta'')`. The same function the RK4 stages evaluate.
+    #[doc(hidden)]
+    pub fn accelerations(&self, dist: &Disturbance) -> (Vector3<f64>, Option<[f64; 2]>) {
+        let f = self.nongravity_force(&self.state, dist);
+        match self.attached_probe() {
+            Some(p) => {
+                let acc = self.coupled(&f, p.params(), p.ang(), p.dang());
+                (acc.vehicle, Some(acc.swing))
+            }
+            None => (
+                f / self.params.mass - Vector3::new(0.0, 0.0, self.params.g),
+                None,
+            ),
+        }
+    }
+
+    /// The probe if it is attached.
+    fn attached_probe(&self) -> Option<&Probe> {
+        self.probe.as_ref().filter(|p| p.is_attached())
+    }
+
+    /// Coupled accelerations of the vehicle and an attached probe of parameters `pp` at
+    /// swing `ang`, `dang` under the non-gravitational force `f`.
+    fn coupled(
+        &self,
+        f: &Vector3<f64>,
+        pp: &ProbeParams,
+        ang: [f64; 2],
+        dang: [f64; 2],
+    ) -> CoupledAcceleration {
+        coupled_acceleration(f, self.params.mass, self.params.g, pp, ang, dang)
+    }
+
+    /// Holds an attached probe with the grounded vehicle: swing rates zero.
+    fn hold_probe(&mut self) {
+        if let Some(p) = self.probe.as_mut().filter(|p| p.is_attached()) {
+            let ang = p.ang();
+            p.set_swing(ang, [0.0; 2]);
         }
     }
 
@@ -378,8 +497,9 @@ impl Plant {
     }
 
     /// Specific acceleration (what an accelerometer measures), body frame, m/s^2: the
-    /// non-gravitational force over the mass, with the last step's disturbance. On the
-    /// ground it is the support force, `R^T (0, 0, g)`.
+    /// non-gravitational force over the mass, with the last step's disturbance, including
+    /// the link force `lambda n` of an attached probe. On the ground it is the support
+    /// force, `R^T (0, 0, g)`.
     pub fn specific_acceleration(&self) -> Vector3<f64> {
         let s = &self.state;
         match self.mode {
@@ -387,7 +507,15 @@ impl Plant {
                 s.q.inverse_transform_vector(&Vector3::new(0.0, 0.0, self.params.g))
             }
             Mode::Airborne => {
-                let f_world = self.nongravity_force(s, &self.last_dist);
+                let mut f_world = self.nongravity_force(s, &self.last_dist);
+                if let Some(p) = self.attached_probe()
+                    && p.params().mass != 0.0
+                {
+                    let tension = self
+                        .coupled(&f_world, p.params(), p.ang(), p.dang())
+                        .tension;
+                    f_world += p.link_direction() * tension;
+                }
                 s.q.inverse_transform_vector(&f_world) / self.params.mass
             }
         }
@@ -403,10 +531,14 @@ impl Plant {
     }
 
     /// Advances the plant by `dt` seconds with rotor speed commands `rotor_cmd` (rad/s,
-    /// clamped to `[omega_min, omega_max]`) and the disturbance `dist`, by one RK4 step.
+    /// clamped to `[omega_min, omega_max]`) and the disturbance `dist`, by one RK4 step
+    /// (with the swing states of an attached probe in the same step; a free probe is
+    /// advanced by its own RK4 step over the same interval).
     ///
     /// Returns the contact status; see the [module documentation](self). Once crashed, does
-    /// nothing and returns the crash. A `dt <= 0` does nothing and returns the last status.
+    /// nothing and returns the crash (the probe is frozen too). A `dt <= 0` does nothing and
+    /// returns the last status. A non-finite probe state is a [`CrashReason::NonFinite`]
+    /// crash like a non-finite vehicle state.
     pub fn step(&mut self, rotor_cmd: &[f64; 4], dist: &Disturbance, dt: f64) -> Contact {
         if let Mode::Crashed(c) = self.mode {
             return c;
@@ -431,21 +563,36 @@ impl Plant {
         let on_ground = self.mode == Mode::OnGround;
         let lift_off = on_ground && {
             let f = self.nongravity_force(&old, dist);
-            f.z > self.params.mass * self.params.g
+            f.z > self.total_mass() * self.params.g
         };
 
-        let x0 = pack(&old);
-        let f = |x: &Vec17| self.derivative(x, &cmd, dist);
-        let k1 = f(&x0);
-        let k2 = f(&(x0 + k1 * (0.5 * dt)));
-        let k3 = f(&(x0 + k2 * (0.5 * dt)));
-        let k4 = f(&(x0 + k3 * dt));
-        let x1 = x0 + (k1 + k2 * 2.0 + k3 * 2.0 + k4) * (dt / 6.0);
-        let mut new = unpack(&x1);
-        if !new.is_finite() {
+        // Swing angles to hold if the vehicle stays on the ground.
+        let held_ang = self.attached_probe().map(|p| p.ang());
+        let mut probe = self.probe.clone();
+        let mut new = match probe.as_mut().filter(|p| p.is_attached()) {
+            Some(p) => {
+                let x0 = pack_attached(&old, p);
+                let pp = *p.params();
+                let x1 = rk4(&x0, dt, |x: &Vec21| {
+                    self.derivative_attached(x, &cmd, dist, &pp)
+                });
+                p.set_swing([x1[17], x1[18]], [x1[19], x1[20]]);
+                unpack(&x1.fixed_rows::<17>(0).into_owned())
+            }
+            None => {
+                let x0 = pack(&old);
+                let x1 = rk4(&x0, dt, |x: &Vec17| self.derivative(x, &cmd, dist));
+                unpack(&x1)
+            }
+        };
+        if let Some(p) = probe.as_mut() {
+            p.advance_free(self.time, dt, self.params.g, &dist.wind);
+        }
+        if !new.is_finite() || !probe.as_ref().is_none_or(|p| p.is_finite()) {
             return self.crash(CrashReason::NonFinite, &old);
         }
         self.time += dt;
+        self.probe = probe;
 
         if on_ground && (!lift_off || new.p.z <= 0.0) {
             // Held on the ground: only the rotors move.
@@ -457,6 +604,10 @@ impl Plant {
             self.state = held;
             self.mode = Mode::OnGround;
             self.last = Contact::OnGround;
+            if let (Some(p), Some(ang)) = (self.probe.as_mut(), held_ang) {
+                p.set_swing(ang, [0.0; 2]);
+            }
+            self.note_probe_strike();
             return self.last;
         }
 
@@ -484,13 +635,24 @@ impl Plant {
                 horizontal_speed: hs,
                 tilt,
             };
+            self.hold_probe();
+            self.note_probe_strike();
             return self.last;
         }
 
         self.state = new;
         self.mode = Mode::Airborne;
         self.last = Contact::Airborne;
+        self.note_probe_strike();
         self.last
+    }
+
+    /// Records a ground strike of the attached probe at the current time, if any.
+    fn note_probe_strike(&mut self) {
+        let (state, time) = (&self.state, self.time);
+        if let Some(p) = self.probe.as_mut() {
+            p.note_ground_strike(state, time);
+        }
     }
 
     /// Freezes the plant in `at` with a crash of `reason`.
@@ -513,10 +675,47 @@ impl Plant {
     fn derivative(&self, x: &Vec17, cmd: &[f64; 4], dist: &Disturbance) -> Vec17 {
         let prm = &self.params;
         let s = unpack(x);
+        let vdot = self.nongravity_force(&s, dist) / prm.mass - Vector3::new(0.0, 0.0, prm.g);
+        self.rigid_derivative(x, &s, cmd, dist, &vdot)
+    }
+
+    /// Time derivative of the packed vehicle and attached-probe state (probe parameters
+    /// `pp`).
+    fn derivative_attached(
+        &self,
+        x: &Vec21,
+        cmd: &[f64; 4],
+        dist: &Disturbance,
+        pp: &ProbeParams,
+    ) -> Vec21 {
+        let xv: Vec17 = x.fixed_rows::<17>(0).into_owned();
+        let s = unpack(&xv);
+        let (ang, dang) = ([x[17], x[18]], [x[19], x[20]]);
+        let f = self.nongravity_force(&s, dist);
+        let acc = self.coupled(&f, pp, ang, dang);
+        let dv = self.rigid_derivative(&xv, &s, cmd, dist, &acc.vehicle);
+        let mut d = Vec21::zeros();
+        d.fixed_rows_mut::<17>(0).copy_from(&dv);
+        d[17] = dang[0];
+        d[18] = dang[1];
+        d[19] = acc.swing[0];
+        d[20] = acc.swing[1];
+        d
+    }
+
+    /// Time derivative of the vehicle's packed state `x` (unpacked: `s`) given its
+    /// translational acceleration `vdot`.
+    fn rigid_derivative(
+        &self,
+        x: &Vec17,
+        s: &QuadState,
+        cmd: &[f64; 4],
+        dist: &Disturbance,
+        vdot: &Vector3<f64>,
+    ) -> Vec17 {
+        let prm = &self.params;
         let qraw = Quaternion::new(x[6], x[7], x[8], x[9]);
         let thrusts = s.omega.map(|o| prm.k_thrust * o * o.abs());
-
-        let vdot = self.nongravity_force(&s, dist) / prm.mass - Vector3::new(0.0, 0.0, prm.g);
         let qdot = qraw * Quaternion::new(0.0, s.w.x, s.w.y, s.w.z) * 0.5;
 
         let pos = prm.rotor_positions();
@@ -531,7 +730,7 @@ impl Plant {
 
         let mut d = Vec17::zeros();
         d.fixed_rows_mut::<3>(0).copy_from(&s.v);
-        d.fixed_rows_mut::<3>(3).copy_from(&vdot);
+        d.fixed_rows_mut::<3>(3).copy_from(vdot);
         d[6] = qdot.w;
         d[7] = qdot.i;
         d[8] = qdot.j;
@@ -547,6 +746,31 @@ impl Plant {
 /// (downward speed, horizontal speed, tilt) of a state.
 fn impact(s: &QuadState) -> (f64, f64, f64) {
     (-s.v.z, s.v.xy().norm(), s.tilt())
+}
+
+/// One classical Runge-Kutta 4 step of `dt` from `x0` for `x' = f(x)`.
+fn rk4<const N: usize>(
+    x0: &SVector<f64, N>,
+    dt: f64,
+    f: impl Fn(&SVector<f64, N>) -> SVector<f64, N>,
+) -> SVector<f64, N> {
+    let k1 = f(x0);
+    let k2 = f(&(x0 + k1 * (0.5 * dt)));
+    let k3 = f(&(x0 + k2 * (0.5 * dt)));
+    let k4 = f(&(x0 + k3 * dt));
+    x0 + (k1 + k2 * 2.0 + k3 * 2.0 + k4) * (dt / 6.0)
+}
+
+/// The vehicle state `s` followed by the swing state of the attached probe `p`.
+fn pack_attached(s: &QuadState, p: &Probe) -> Vec21 {
+    let mut x = Vec21::zeros();
+    x.fixed_rows_mut::<17>(0).copy_from(&pack(s));
+    let ([a, b], [da, db]) = (p.ang(), p.dang());
+    x[17] = a;
+    x[18] = b;
+    x[19] = da;
+    x[20] = db;
+    x
 }
 
 fn pack(s: &QuadState) -> Vec17 {

@@ -521,14 +521,7 @@ fn draw_figure(
         }
         root.present()?;
     }
-    let file = std::io::BufWriter::new(std::fs::File::create(path)?);
-    let mut enc = png::Encoder::new(file, WIDTH, HEIGHT);
-    enc.set_color(png::ColorType::Rgb);
-    enc.set_depth(png::BitDepth::Eight);
-    let mut writer = enc.write_header()?;
-    writer.write_image_data(&rgb)?;
-    writer.finish()?;
-    Ok(())
+    encode_png(path, &rgb)
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -770,4 +763,146 @@ fn distinct_pixels<DB: DrawingBackend>(
         }
     }
     out
+}
+
+/// What [`write_throw_plot`] draws: the side view (x along the throw, z up) of one
+/// flip-and-throw trial.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ThrowView {
+    /// The probe's path, (horizontal distance along the throw, height) [m].
+    pub probe: Vec<(f64, f64)>,
+    /// The vehicle's path, same axes [m].
+    pub vehicle: Vec<(f64, f64)>,
+    /// Where the probe was released.
+    pub release: Option<(f64, f64)>,
+    /// Where the probe came down.
+    pub landing: Option<f64>,
+    /// The target on the ground.
+    pub target: f64,
+    /// The landing tolerance around the target [m] (drawn as a band).
+    pub tolerance: f64,
+}
+
+/// Draws the side view of a throw (probe and vehicle paths, release point, target with its
+/// tolerance band, landing point) into `path` ([`WIDTH`] x [`HEIGHT`] PNG).
+///
+/// # Errors
+/// [`PlotError::Empty`] if the probe path is empty; [`PlotError::CreateDir`],
+/// [`PlotError::Font`] or [`PlotError::Draw`] if the figure cannot be drawn or written.
+pub fn write_throw_plot(path: &Path, title: &str, view: &ThrowView) -> Result<(), PlotError> {
+    if view.probe.is_empty() {
+        return Err(PlotError::Empty {
+            path: path.to_path_buf(),
+        });
+    }
+    if let Some(dir) = path.parent()
+        && !dir.as_os_str().is_empty()
+    {
+        std::fs::create_dir_all(dir).map_err(|source| PlotError::CreateDir {
+            path: dir.to_path_buf(),
+            source,
+        })?;
+    }
+    register_embedded_font()?;
+    draw_throw(path, title, view).map_err(|source| PlotError::Draw {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+fn draw_throw(path: &Path, title: &str, v: &ThrowView) -> DrawResult<()> {
+    let mut rgb = vec![0u8; WIDTH as usize * HEIGHT as usize * 3];
+    {
+        let root = BitMapBackend::with_buffer(&mut rgb, (WIDTH, HEIGHT)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let pts = v.probe.iter().chain(&v.vehicle).copied();
+        let (x0, x1) = padded(
+            finite_range(pts.clone().map(|p| p.0).chain([
+                v.target + v.tolerance,
+                v.target - v.tolerance,
+                0.0,
+            ])),
+            0.03,
+        );
+        let (_, z1) = padded(finite_range(pts.map(|p| p.1).chain([0.0])), 0.05);
+        let mut chart = ChartBuilder::on(&root)
+            .caption(title, (FONT, 26))
+            .margin(12)
+            .x_label_area_size(44)
+            .y_label_area_size(56)
+            .build_cartesian_2d(x0..x1, 0.0..z1.max(1.0))?;
+        chart
+            .configure_mesh()
+            .x_desc("distance along the throw [m]")
+            .y_desc("height [m]")
+            .label_style((FONT, 16))
+            .draw()?;
+        let band = [
+            (v.target - v.tolerance, 0.0),
+            (v.target + v.tolerance, 0.06 * z1),
+        ];
+        chart
+            .draw_series(std::iter::once(Rectangle::new(
+                band,
+                RGBColor(0xf4, 0xc4, 0xc4).filled(),
+            )))?
+            .label(format!("target ± {:.1} m", v.tolerance))
+            .legend(|(x, y)| Rectangle::new([(x, y - 5), (x + 20, y + 5)], REF_COLOR.filled()));
+        chart.draw_series(std::iter::once(Cross::new(
+            (v.target, 0.0),
+            10,
+            REF_COLOR.stroke_width(3),
+        )))?;
+        chart
+            .draw_series(LineSeries::new(
+                v.vehicle.iter().copied(),
+                TRUE_COLOR.stroke_width(2),
+            ))?
+            .label("vehicle")
+            .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], TRUE_COLOR.stroke_width(2)));
+        chart
+            .draw_series(LineSeries::new(
+                v.probe.iter().copied(),
+                EXTRA_COLOR.stroke_width(2),
+            ))?
+            .label("probe")
+            .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], EXTRA_COLOR.stroke_width(2)));
+        if let Some(r) = v.release {
+            chart
+                .draw_series(std::iter::once(Circle::new(r, 6, BLACK.filled())))?
+                .label("release")
+                .legend(|(x, y)| Circle::new((x + 10, y), 5, BLACK.filled()));
+        }
+        if let Some(l) = v.landing {
+            chart
+                .draw_series(std::iter::once(TriangleMarker::new(
+                    (l, 0.0),
+                    9,
+                    EXTRA_COLOR.filled(),
+                )))?
+                .label(format!("landing ({l:.2} m)"))
+                .legend(|(x, y)| TriangleMarker::new((x + 10, y), 6, EXTRA_COLOR.filled()));
+        }
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperLeft)
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .label_font((FONT, 16))
+            .draw()?;
+        root.present()?;
+    }
+    encode_png(path, &rgb)
+}
+
+/// Encodes a [`WIDTH`] x [`HEIGHT`] RGB buffer as PNG with the `png` crate.
+fn encode_png(path: &Path, rgb: &[u8]) -> DrawResult<()> {
+    let file = std::io::BufWriter::new(std::fs::File::create(path)?);
+    let mut enc = png::Encoder::new(file, WIDTH, HEIGHT);
+    enc.set_color(png::ColorType::Rgb);
+    enc.set_depth(png::BitDepth::Eight);
+    let mut writer = enc.write_header()?;
+    writer.write_image_data(rgb)?;
+    writer.finish()?;
+    Ok(())
 }

@@ -1,0 +1,189 @@
+//! The flip-and-throw mission against the issue's acceptance criteria: the probe lands within
+//! 0.5 m of the target in 10 of 10 noisy trials at 20 m, the other ranges of the table work,
+//! the vehicle recovers (0.15 m of the hold point within 3 s of release, never below 1 m, no
+//! fallbacks), and an unreachable range is an error that names the reachable maximum.
+
+use mpc_sim::release::{self, ReleaseError};
+use mpc_sim::throw::{
+    LANDING_TOL_M, ThrowConfig, ThrowError, ThrowSimConfig, ThrowSummary, plan_throw,
+    run_throw_trial, summarize_throw,
+};
+
+const G: f64 = 9.81;
+
+fn fly(range: f64, seeds: std::ops::Range<u64>) -> Vec<ThrowSummary> {
+    let seeds: Vec<u64> = seeds.collect();
+    let mut out: Vec<(u64, ThrowSummary)> = std::thread::scope(|s| {
+        let handles: Vec<_> = seeds
+            .chunks(seeds.len().div_ceil(2).max(1))
+            .map(|chunk| {
+                s.spawn(move || {
+                    chunk
+                        .iter()
+                        .map(|&seed| {
+                            let mut cfg = ThrowSimConfig::new(ThrowConfig {
+                                range,
+                                ..ThrowConfig::default()
+                            });
+                            cfg.seed = seed;
+                            let tr = run_throw_trial(&cfg).expect("the throw is planned");
+                            (seed, summarize_throw(&tr))
+                        })
+                        .collect::<Vec<_>>()
+                })
+            })
+            .collect();
+        handles
+            .into_iter()
+            .flat_map(|h| h.join().expect("a trial thread"))
+            .collect()
+    });
+    out.sort_by_key(|(s, _)| *s);
+    out.into_iter().map(|(_, s)| s).collect()
+}
+
+fn check(s: &ThrowSummary) {
+    println!(
+        "range {:>4} seed {:>2}: landed at ({:.3}, {:.3}), error {:.3} m; released at {:.2} m/s, \
+         {:.1} deg; recovery {:.2} s; lowest {:.2} m; fallbacks {}",
+        s.range_m,
+        s.seed,
+        s.probe_landing_x_m.unwrap_or(f64::NAN),
+        s.probe_landing_y_m.unwrap_or(f64::NAN),
+        s.probe_landing_error_m.unwrap_or(f64::NAN),
+        s.release_speed_m_s.unwrap_or(f64::NAN),
+        s.release_angle_rad.unwrap_or(f64::NAN).to_degrees(),
+        s.recovery_time_s.unwrap_or(f64::NAN),
+        s.min_altitude_m,
+        s.fallbacks
+    );
+    assert!(s.success, "seed {}: {:?}", s.seed, s.failures);
+    assert!(s.release_triggered);
+    let err = s.probe_landing_error_m.expect("the probe landed");
+    assert!(err < LANDING_TOL_M, "seed {}: {err} m", s.seed);
+    // Independent of the summary's own arithmetic: the landing point against the target.
+    let (x, y) = (
+        s.probe_landing_x_m.unwrap_or(f64::NAN),
+        s.probe_landing_y_m.unwrap_or(f64::NAN),
+    );
+    let d = ((x - s.target_m[0]).powi(2) + (y - s.target_m[1]).powi(2)).sqrt();
+    assert!((d - err).abs() < 1e-9);
+    assert!(s.recovery_time_s.is_some_and(|t| t <= 3.0), "{s:?}");
+    assert!(s.min_altitude_m >= 1.0, "{s:?}");
+    assert_eq!(s.fallbacks, 0, "seed {}", s.seed);
+}
+
+#[test]
+fn range_20_lands_within_half_a_metre_in_ten_noisy_trials() {
+    let runs = fly(20.0, 0..10);
+    assert_eq!(runs.len(), 10);
+    for s in &runs {
+        check(s);
+        // The trigger released at the velocity the range equation asks for: from the
+        // recorded release state the drag-free range equation reaches the target.
+        let v = s.release_speed_m_s.unwrap_or(f64::NAN);
+        let th = s.release_angle_rad.unwrap_or(f64::NAN);
+        let h = s.release_height_m.unwrap_or(f64::NAN);
+        let r = release::range(v, th, h, G);
+        assert!(r > 15.0 && r < 25.0, "{r}");
+    }
+}
+
+#[test]
+fn the_other_ranges_of_the_table_land_too() {
+    for range in [5.0, 10.0, 15.0, 25.0] {
+        for s in fly(range, 0..2) {
+            check(&s);
+        }
+    }
+}
+
+#[test]
+fn an_unreachable_range_is_an_error_that_names_the_maximum() {
+    let cfg = ThrowConfig {
+        range: 40.0,
+        ..ThrowConfig::default()
+    };
+    let err = plan_throw(&cfg, 1.0).expect_err("40 m is beyond 16 m/s");
+    let msg = err.to_string();
+    match err {
+        ThrowError::Release {
+            source: ReleaseError::Unreachable { max_range, .. },
+            ..
+        } => {
+            assert!(max_range > 25.0 && max_range < 40.0, "{max_range}");
+            assert!(msg.contains("maximum range"), "{msg}");
+            assert!(msg.contains("v_max"), "{msg}");
+        }
+        e => panic!("not Unreachable: {e}"),
+    }
+    // A faster bound makes it reachable in the planner's eyes.
+    let mut fast = cfg.clone();
+    fast.bounds.v_max = 30.0;
+    match plan_throw(&fast, 1.0) {
+        Ok(_) | Err(ThrowError::Unachievable { .. }) => {}
+        Err(e) => panic!("{e}"),
+    }
+}
+
+#[test]
+fn the_plan_releases_at_the_asked_velocity_and_lands_past_the_target() {
+    let cfg = ThrowConfig::default();
+    let plan = plan_throw(&cfg, 1.0).unwrap();
+    // The plan's terminal probe velocity is the asked one (planned release velocity plus the
+    // speed margin) to 5 %.
+    let miss = (plan.release_velocity - plan.asked_velocity).norm();
+    assert!(miss < 0.05 * plan.asked_velocity.norm(), "{miss}");
+    // The planned release (V, theta) reaches the target from the release point.
+    let along = plan.target.x - plan.release_point.x;
+    let r = release::range(
+        plan.release.speed,
+        plan.release.angle,
+        plan.release_point.z,
+        G,
+    );
+    assert!((r - along).abs() < 0.05, "{r} vs {along}");
+    // With the margin the planned swing throws past the target, so the trigger fires before
+    // the plan's end.
+    assert!(
+        plan.planned_landing.x > plan.target.x,
+        "{:?}",
+        plan.planned_landing
+    );
+    assert_eq!(plan.states.len(), 2 * quadrotor_probe::N + 1);
+}
+
+#[test]
+fn bad_settings_are_rejected_with_the_field_named() {
+    let bad = [
+        (
+            ThrowConfig {
+                range: -1.0,
+                ..ThrowConfig::default()
+            },
+            "range",
+        ),
+        (
+            ThrowConfig {
+                probe: mpc_sim::probe::ProbeParams {
+                    length: 0.7,
+                    ..Default::default()
+                },
+                ..ThrowConfig::default()
+            },
+            "probe length",
+        ),
+        (
+            ThrowConfig {
+                recover_time: 0.0,
+                ..ThrowConfig::default()
+            },
+            "recover_time",
+        ),
+    ];
+    for (cfg, what) in bad {
+        let e = plan_throw(&cfg, 1.0).expect_err(what);
+        assert!(matches!(e, ThrowError::Invalid(_)), "{e}");
+        assert!(e.to_string().contains(what), "{e}");
+    }
+}
