@@ -14,26 +14,32 @@
 //!    `v + l (n_a alpha' + n_b beta')` minus the wanted release velocity). The release point
 //!    (probe position at the end of the plan) moves the range and the height the release
 //!    velocity is planned for, so steps 1 and 2 alternate until the release point settles
-//!    (to 1 cm; three or four rounds). The release velocity asked of the plan is
+//!    (to 1 cm; a few rounds). The release velocity asked of the plan is
 //!    `1 + speed_margin` times the planned one, so that on the real vehicle the probe's
 //!    predicted landing point passes the target during the swing rather than stopping short.
 //! 3. **Closed loop** ([`run_throw_trial`]): the same solver in RTI mode at 20 Hz tracks the
 //!    plan (states, including the swing angles and rates, and controls as references, with the
-//!    probe mass parameter at 0.2 kg); the body-rate and thrust command go through the
-//!    PX4-like rate loop to the coupled vehicle-and-probe plant.
+//!    probe mass parameter at 0.2 kg); the body-rate and thrust setpoints go through the
+//!    PX4-like rate loop to the coupled vehicle-and-probe plant. The model carries the rate
+//!    loop's and the rotors' first-order lags as states (the delivered rates come from the
+//!    gyro, the delivered thrust from the model's own lag of the commands), and the estimate
+//!    is brought forward by the pose latency with the gyro and the accelerometer.
 //! 4. **Release instant**: at every 1 kHz step of the throw, the drag-free landing point of the
-//!    probe is predicted from the estimate (vehicle position and velocity, compensated for the
-//!    pose latency with the accelerometer, plus the link-angle encoder); the probe is released
-//!    at the first step at which the predicted range reaches the target. On the planned
+//!    probe is predicted from the (latency-compensated) estimate and the link-angle encoder;
+//!    the probe is released at the step nearest to the predicted range crossing the target
+//!    (now, if the range is past the target or closer to it than the next step will be).
+//!    On the planned
 //!    trajectory that is the instant at which the probe's velocity matches the planned
 //!    `(V, theta_t)`; under noise and model error it is the instant that lands the probe on
 //!    the target. If the range is not reached within the release window, the probe is
 //!    released at the window's end and the trial fails.
 //! 5. **Recovery**: at release the probe mass parameter is set to zero (no regeneration: with
-//!    `mp = 0` the model's vehicle part is the plain rate model QR-bench uses, checked in
-//!    `mpc-dsl/tests/probe_model.rs`), the swing states lose their weights, and the reference
-//!    becomes a quintic from the vehicle's state at release to the hold point, then hold,
-//!    return home, land.
+//!    `mp = 0` the swing states are frozen and the model's vehicle part is the plain rate
+//!    model QR-bench uses, plus the lags; checked in `mpc-dsl/tests/probe_model.rs`), the
+//!    swing states lose their weights, the solver restarts from the measured state with one
+//!    converged solve (a few SQP iterations: the plan's trajectory no longer fits), and the
+//!    reference becomes a quintic from the vehicle's state at release to the hold point, then
+//!    hold, return home, land.
 //!
 //! The thrust command in newtons is `(mq + mp) c` with the nominal masses; the mass estimator
 //! of the flip mission is not used (the link force would bias it).
