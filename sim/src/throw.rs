@@ -875,19 +875,56 @@ fn compensated(e: &Estimate, acc_world: &Vector3<f64>, latency: f64) -> Estimate
     c
 }
 
-/// The probe's landing point predicted from the estimate, the accelerometer and the encoder.
-#[allow(clippy::too_many_arguments)]
+/// Landing point of a point mass with quadratic drag (acceleration `-k |v| v - g e3`,
+/// `k = drag / mass`): RK4 at 5 ms until `z <= 0`, the crossing interpolated linearly inside
+/// the last step (the drag-free case is [`release::landing_point`], exact). `None` if it has
+/// not come down within 60 s.
+fn landing_with_drag(p: &Vector3<f64>, v: &Vector3<f64>, k: f64) -> Option<Vector3<f64>> {
+    const H: f64 = 0.005;
+    let acc = |v: &Vector3<f64>| -v * (k * v.norm()) - Vector3::z() * G;
+    let (mut p, mut v) = (*p, *v);
+    if p.z <= 0.0 {
+        return Some(Vector3::new(p.x, p.y, 0.0));
+    }
+    for _ in 0..12_000 {
+        let (k1p, k1v) = (v, acc(&v));
+        let v2 = v + k1v * (0.5 * H);
+        let (k2p, k2v) = (v2, acc(&v2));
+        let v3 = v + k2v * (0.5 * H);
+        let (k3p, k3v) = (v3, acc(&v3));
+        let v4 = v + k3v * H;
+        let (k4p, k4v) = (v4, acc(&v4));
+        let pn = p + (k1p + k2p * 2.0 + k3p * 2.0 + k4p) * (H / 6.0);
+        let vn = v + (k1v + k2v * 2.0 + k3v * 2.0 + k4v) * (H / 6.0);
+        if pn.z <= 0.0 {
+            let s = p.z / (p.z - pn.z);
+            let l = p + (pn - p) * s;
+            return Some(Vector3::new(l.x, l.y, 0.0));
+        }
+        (p, v) = (pn, vn);
+    }
+    None
+}
+
+/// The probe's landing point predicted from the (latency-compensated) estimate and the
+/// encoder, with the probe's drag if it has any; also the probe's position and velocity.
 fn predicted_landing(
     est: &Estimate,
     swing: ([f64; 2], [f64; 2]),
-    l: f64,
+    probe: &ProbeParams,
 ) -> Option<(Vector3<f64>, Vector3<f64>, Vector3<f64>)> {
     let (p, v) = (est.p, est.v);
     let (ang, dang) = swing;
     let (na, nb) = link_jacobian(ang);
+    let l = probe.length;
     let pp = p + link_direction(ang) * l;
     let pv = v + (na * dang[0] + nb * dang[1]) * l;
-    landing(&pp, &pv).map(|lp| (lp, pp, pv))
+    let lp = if probe.drag > 0.0 {
+        landing_with_drag(&pp, &pv, probe.drag / probe.mass)
+    } else {
+        landing(&pp, &pv)
+    };
+    lp.map(|lp| (lp, pp, pv))
 }
 
 /// Runs one flip-and-throw trial (planning included).
@@ -913,7 +950,6 @@ pub fn run_throw_trial(cfg: &ThrowSimConfig) -> Result<ThrowTrial, ThrowError> {
     let mp = tc.probe.mass;
     let plan = plan_throw(tc, mq)?;
     let dt = cfg.dt;
-    let l = tc.probe.length;
     let dir = tc.direction();
     let target = plan.target;
 
@@ -981,7 +1017,7 @@ pub fn run_throw_trial(cfg: &ThrowSimConfig) -> Result<ThrowTrial, ThrowError> {
         // Release decision (1 kHz).
         let attached = release_rec.is_none();
         if phase == Phase::Flip && attached && t >= window.0 {
-            let pred = predicted_landing(&e, swing, l);
+            let pred = predicted_landing(&e, swing, &tc.probe);
             // Release at the step nearest to the crossing: now, if the predicted range is
             // past the target or closer to it than the next step will be.
             let along = pred.map(|(lp, _, _)| (lp - target).dot(&dir));
