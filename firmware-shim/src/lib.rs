@@ -1,0 +1,28 @@
+//! `firmware-shim`: the bridge between an mpcc-generated solver and the PX4 autopilot.
+//!
+//! Work in progress (issue 9). What is here:
+//!
+//! * [`frames`]: conversions between PX4's NED world frame / FRD body frame and the models'
+//!   ENU / FLU, for positions, velocities, quaternions and body rates;
+//! * [`setpoint`]: the body-rate + collective-thrust setpoint PX4 takes, made safe (never
+//!   non-finite, always in range) and mapped to PX4's normalized thrust with a calibrated
+//!   hover-thrust parameter;
+//! * [`messages`]: the MAVLink 2 (common dialect) messages of the offboard link, built and
+//!   read with the `mavlink` crate: HEARTBEAT, SET_ATTITUDE_TARGET, COMMAND_LONG (arm, mode,
+//!   land, return) and the state PX4 sends (ODOMETRY, LOCAL_POSITION_NED,
+//!   ATTITUDE_QUATERNION, EXTENDED_SYS_STATE, HEARTBEAT with PX4's custom mode);
+//! * [`link`]: the offboard session as a state machine clocked by the caller: streaming
+//!   before OFFBOARD, mode and arm commands with acknowledgements, retries and timeouts,
+//!   and the failsafes (odometry lost, solver failures, operator abort, PX4 leaving
+//!   OFFBOARD).
+//!
+//! Not yet: the transports (UDP/serial through `mavlink::connect`), the controller loop that
+//! ties the session to a generated solver, `mpcc sitl` and `mpcc fly`.
+
+pub mod frames;
+pub mod link;
+pub mod messages;
+pub mod setpoint;
+
+/// The linear-algebra crate of this crate's API.
+pub use nalgebra;

@@ -1,0 +1,351 @@
+//! The offboard session as a state machine, clocked by the caller (no threads, no sockets):
+//! feed it what PX4 sends ([`Session::on_inbound`]) and call [`Session::tick`] at the
+//! controller rate; it says which messages to send and whether the MPC's setpoints fly the
+//! vehicle. The caller streams a setpoint at every tick, whatever the session's phase: PX4
+//! drops out of OFFBOARD when the stream pauses (COM_OF_LOSS_T), so the stream never waits
+//! for an acknowledgement.
+//!
+//! Sequence (as PX4 v1.16 accepted it on SITL, `shared/anchors/PX4_OFFBOARD.md`):
+//!
+//! 1. stream setpoints for at least [`LinkConfig::stream_before_offboard`] (1 s);
+//! 2. MAV_CMD_DO_SET_MODE OFFBOARD, until acknowledged (retries, timeouts; duplicate acks are
+//!    fine) and the HEARTBEAT shows OFFBOARD (it may take up to 1 s to show);
+//! 3. MAV_CMD_COMPONENT_ARM_DISARM arm, until acknowledged and the HEARTBEAT shows armed;
+//! 4. flying: the MPC's setpoints fly the vehicle.
+//!
+//! Failsafes while flying:
+//!
+//! * odometry older than [`LinkConfig::odometry_timeout`] (100 ms) or never received: request
+//!   return mode (AUTO.RTL), the paper's trial-9 behaviour;
+//! * [`LinkConfig::max_solver_failures`] consecutive solver failures (each one already flew
+//!   the previous plan, from the runtime): request return mode;
+//! * operator abort ([`Session::abort`]): request AUTO.LAND, not just exit;
+//! * PX4 leaving OFFBOARD on its own (its own failsafe, the pilot): the session stops flying
+//!   and reports it.
+//!
+//! A command that stays unacknowledged after [`LinkConfig::retries`] retransmissions ends the
+//! session in [`Phase::Failed`] with the reason; a failsafe command is retried the same way
+//! but its failure leaves the session in its failsafe phase (there is nothing better to do
+//! than to keep asking).
+
+use mavlink::dialects::common::{MavCmd, MavMessage};
+
+use crate::messages::{self, Command, Inbound, Px4Mode};
+
+/// Timing of the session. Times in seconds of the caller's clock (clock it from the
+/// vehicle's timestamps in simulation: PX4 scales its timeouts with the speed-up factor).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LinkConfig {
+    /// HEARTBEAT period.
+    pub heartbeat_period: f64,
+    /// Wait this long for a COMMAND_ACK before retransmitting.
+    pub ack_timeout: f64,
+    /// Retransmissions of an unacknowledged command before giving up.
+    pub retries: u8,
+    /// Setpoints stream this long before OFFBOARD is requested (PX4 needs > 0).
+    pub stream_before_offboard: f64,
+    /// After an accepted mode or arm command, wait this long for the HEARTBEAT to show it.
+    pub confirm_timeout: f64,
+    /// Odometry older than this in flight is lost: return mode.
+    pub odometry_timeout: f64,
+    /// This many consecutive solver failures: return mode.
+    pub max_solver_failures: u32,
+}
+
+impl Default for LinkConfig {
+    /// Heartbeat 1 s, ack timeout 0.5 s with 3 retries, 1 s of streaming before OFFBOARD,
+    /// 2 s for the heartbeat to confirm, odometry timeout 0.1 s, 5 solver failures.
+    fn default() -> Self {
+        Self {
+            heartbeat_period: 1.0,
+            ack_timeout: 0.5,
+            retries: 3,
+            stream_before_offboard: 1.0,
+            confirm_timeout: 2.0,
+            odometry_timeout: 0.1,
+            max_solver_failures: 5,
+        }
+    }
+}
+
+/// Why the session stopped flying the MPC.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Failsafe {
+    /// Odometry stale or lost.
+    OdometryLost,
+    /// Too many consecutive solver failures.
+    SolverFailures,
+    /// The operator aborted.
+    Abort,
+    /// PX4 left OFFBOARD on its own.
+    Px4LeftOffboard,
+}
+
+/// Where the session is.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Phase {
+    /// Streaming setpoints before asking for OFFBOARD, since the given time.
+    Streaming {
+        /// When streaming began.
+        since: f64,
+    },
+    /// Waiting for OFFBOARD to be acknowledged and shown.
+    RequestingOffboard,
+    /// Waiting for arming to be acknowledged and shown.
+    Arming,
+    /// The MPC flies the vehicle.
+    Flying,
+    /// A failsafe asked PX4 for a mode (return or land); the MPC no longer flies.
+    Failsafe(Failsafe),
+    /// The session could not start (a command was refused or never acknowledged).
+    Failed(SessionError),
+}
+
+/// Why a session could not start.
+#[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
+pub enum SessionError {
+    /// PX4 refused a command.
+    #[error("PX4 refused {0:?}; check its pre-arm messages (QGroundControl) and the mode")]
+    Refused(MavCmd),
+    /// No COMMAND_ACK after every retry.
+    #[error(
+        "no COMMAND_ACK for {0:?} after all retries: is PX4 on this link (system 1, component \
+         1) and is the link bidirectional?"
+    )]
+    NoAck(MavCmd),
+    /// Acknowledged, but the HEARTBEAT never showed the result.
+    #[error("PX4 acknowledged {0:?} but its HEARTBEAT never showed the result")]
+    NotConfirmed(MavCmd),
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Pending {
+    cmd: Command,
+    sent_at: f64,
+    attempts: u8,
+    acked_at: Option<f64>,
+}
+
+/// What one tick asks of the caller.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Tick {
+    /// Messages to send now (besides the setpoint).
+    pub send: Vec<MavMessage>,
+    /// Whether the MPC's setpoint flies the vehicle (false: stream a neutral setpoint).
+    pub mpc_in_control: bool,
+    /// A failsafe that engaged at this tick.
+    pub failsafe: Option<Failsafe>,
+}
+
+/// The offboard session.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Session {
+    cfg: LinkConfig,
+    phase: Phase,
+    pending: Option<Pending>,
+    last_heartbeat_sent: Option<f64>,
+    last_odometry: Option<f64>,
+    px4_mode: Option<Px4Mode>,
+    armed: bool,
+    solver_failures: u32,
+    abort: bool,
+}
+
+impl Session {
+    /// A session that starts streaming at `now`.
+    pub fn new(cfg: LinkConfig, now: f64) -> Self {
+        Self {
+            cfg,
+            phase: Phase::Streaming { since: now },
+            pending: None,
+            last_heartbeat_sent: None,
+            last_odometry: None,
+            px4_mode: None,
+            armed: false,
+            solver_failures: 0,
+            abort: false,
+        }
+    }
+
+    /// The current phase.
+    pub fn phase(&self) -> Phase {
+        self.phase
+    }
+
+    /// PX4's mode as its last HEARTBEAT showed it.
+    pub fn px4_mode(&self) -> Option<Px4Mode> {
+        self.px4_mode
+    }
+
+    /// Whether PX4's last HEARTBEAT showed it armed.
+    pub fn armed(&self) -> bool {
+        self.armed
+    }
+
+    /// Records what PX4 sent at time `now`.
+    pub fn on_inbound(&mut self, inbound: &Inbound, now: f64) {
+        match *inbound {
+            Inbound::Heartbeat { armed, mode } => {
+                self.armed = armed;
+                self.px4_mode = Some(mode);
+            }
+            Inbound::Odometry(_) => self.last_odometry = Some(now),
+            Inbound::Ack {
+                command,
+                accepted,
+                in_progress,
+            } => {
+                if let Some(p) = &mut self.pending
+                    && p.cmd.mav_cmd() == command
+                {
+                    if accepted {
+                        p.acked_at.get_or_insert(now);
+                    } else if !in_progress {
+                        if matches!(self.phase, Phase::Failsafe(_)) {
+                            // Keep asking: a failsafe has no better option.
+                            p.sent_at = f64::NEG_INFINITY;
+                        } else {
+                            self.phase = Phase::Failed(SessionError::Refused(command));
+                            self.pending = None;
+                        }
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+
+    /// The result of one solver step (call once per controller step while flying).
+    pub fn on_solver(&mut self, ok: bool) {
+        if ok {
+            self.solver_failures = 0;
+        } else {
+            self.solver_failures = self.solver_failures.saturating_add(1);
+        }
+    }
+
+    /// The operator asks to stop (Ctrl-C): the next tick requests AUTO.LAND.
+    pub fn abort(&mut self) {
+        self.abort = true;
+    }
+
+    fn start(&mut self, cmd: Command, now: f64, out: &mut Vec<MavMessage>) {
+        self.pending = Some(Pending {
+            cmd,
+            sent_at: now,
+            attempts: 0,
+            acked_at: None,
+        });
+        out.push(messages::command_long(cmd, 0));
+    }
+
+    fn engage(&mut self, f: Failsafe, now: f64, tick: &mut Tick) {
+        self.phase = Phase::Failsafe(f);
+        tick.failsafe = Some(f);
+        let mode = if f == Failsafe::Abort {
+            Px4Mode::Land
+        } else {
+            Px4Mode::Return
+        };
+        if f != Failsafe::Px4LeftOffboard {
+            self.start(Command::SetMode(mode), now, &mut tick.send);
+        } else {
+            self.pending = None;
+        }
+    }
+
+    /// Whether the pending command is done: acknowledged and, for mode and arm commands,
+    /// shown by the HEARTBEAT.
+    fn confirmed(&self, p: &Pending) -> bool {
+        p.acked_at.is_some()
+            && match p.cmd {
+                Command::SetMode(m) => self.px4_mode == Some(m),
+                Command::Arm => self.armed,
+                Command::Disarm => !self.armed,
+                Command::MessageInterval { .. } => true,
+            }
+    }
+
+    /// One step at time `now`.
+    pub fn tick(&mut self, now: f64) -> Tick {
+        let mut tick = Tick::default();
+        if self
+            .last_heartbeat_sent
+            .is_none_or(|t| now - t >= self.cfg.heartbeat_period)
+        {
+            tick.send.push(messages::heartbeat());
+            self.last_heartbeat_sent = Some(now);
+        }
+        // Retransmissions and timeouts of the pending command.
+        if let Some(p) = self.pending {
+            if self.confirmed(&p) {
+                self.pending = None;
+            } else if let Some(ta) = p.acked_at {
+                if now - ta > self.cfg.confirm_timeout {
+                    self.pending = None;
+                    if !matches!(self.phase, Phase::Failsafe(_)) {
+                        self.phase = Phase::Failed(SessionError::NotConfirmed(p.cmd.mav_cmd()));
+                    }
+                }
+            } else if now - p.sent_at >= self.cfg.ack_timeout {
+                let failsafe = matches!(self.phase, Phase::Failsafe(_));
+                if p.attempts >= self.cfg.retries && !failsafe {
+                    self.pending = None;
+                    self.phase = Phase::Failed(SessionError::NoAck(p.cmd.mav_cmd()));
+                } else {
+                    let attempts = p.attempts.saturating_add(1);
+                    self.pending = Some(Pending {
+                        sent_at: now,
+                        attempts,
+                        ..p
+                    });
+                    tick.send.push(messages::command_long(p.cmd, attempts));
+                }
+            }
+        }
+        if self.abort
+            && !matches!(
+                self.phase,
+                Phase::Failsafe(Failsafe::Abort) | Phase::Failed(_)
+            )
+        {
+            self.engage(Failsafe::Abort, now, &mut tick);
+            return tick;
+        }
+        match self.phase {
+            Phase::Streaming { since } => {
+                if now - since >= self.cfg.stream_before_offboard {
+                    self.phase = Phase::RequestingOffboard;
+                    self.start(Command::SetMode(Px4Mode::Offboard), now, &mut tick.send);
+                }
+            }
+            Phase::RequestingOffboard => {
+                if self.pending.is_none() {
+                    self.phase = Phase::Arming;
+                    self.start(Command::Arm, now, &mut tick.send);
+                }
+            }
+            Phase::Arming => {
+                if self.pending.is_none() {
+                    self.phase = Phase::Flying;
+                    self.solver_failures = 0;
+                }
+            }
+            Phase::Flying => {
+                let stale = self
+                    .last_odometry
+                    .is_none_or(|t| now - t > self.cfg.odometry_timeout);
+                if stale {
+                    self.engage(Failsafe::OdometryLost, now, &mut tick);
+                } else if self.solver_failures >= self.cfg.max_solver_failures {
+                    self.engage(Failsafe::SolverFailures, now, &mut tick);
+                } else if self.px4_mode.is_some_and(|m| m != Px4Mode::Offboard) {
+                    self.engage(Failsafe::Px4LeftOffboard, now, &mut tick);
+                }
+            }
+            Phase::Failsafe(_) | Phase::Failed(_) => {}
+        }
+        tick.mpc_in_control = self.phase == Phase::Flying;
+        tick
+    }
+}

@@ -1,0 +1,292 @@
+//! The offboard session against PX4's rules, with a scripted PX4 and a fake clock.
+
+use firmware_shim::link::{Failsafe, LinkConfig, Phase, Session, SessionError};
+use firmware_shim::messages::{Inbound, OdometryNed, Px4Mode};
+use mavlink::dialects::common::{MavCmd, MavMessage};
+
+const DT: f64 = 0.01;
+
+fn odom() -> Inbound {
+    Inbound::Odometry(OdometryNed {
+        time_us: 0,
+        position: [0.0; 3],
+        velocity: [0.0; 3],
+        q: [1.0, 0.0, 0.0, 0.0],
+        rates: [0.0; 3],
+    })
+}
+
+fn ack(command: MavCmd, accepted: bool) -> Inbound {
+    Inbound::Ack {
+        command,
+        accepted,
+        in_progress: false,
+    }
+}
+
+/// The commands in `msgs`: (command, param2, confirmation).
+fn commands(msgs: &[MavMessage]) -> Vec<(MavCmd, f32, u8)> {
+    msgs.iter()
+        .filter_map(|m| match m {
+            MavMessage::COMMAND_LONG(c) => Some((c.command, c.param2, c.confirmation)),
+            _ => None,
+        })
+        .collect()
+}
+
+/// A well-behaved PX4: acknowledges every command (twice, as PX4 v1.16 did for the mode),
+/// shows the mode and the armed flag in the next heartbeat, streams odometry.
+struct Px4 {
+    mode: Px4Mode,
+    armed: bool,
+    odometry: bool,
+    acks: bool,
+}
+
+impl Px4 {
+    fn new() -> Self {
+        Self {
+            mode: Px4Mode::Position,
+            armed: false,
+            odometry: true,
+            acks: true,
+        }
+    }
+
+    fn answer(&mut self, s: &mut Session, sent: &[MavMessage], now: f64) {
+        for (cmd, p2, _) in commands(sent) {
+            match cmd {
+                MavCmd::MAV_CMD_DO_SET_MODE => {
+                    self.mode = match p2 as u8 {
+                        6 => Px4Mode::Offboard,
+                        4 => Px4Mode::Return,
+                        _ => self.mode,
+                    };
+                    if self.acks {
+                        s.on_inbound(&ack(cmd, true), now);
+                        s.on_inbound(&ack(cmd, true), now);
+                    }
+                }
+                MavCmd::MAV_CMD_COMPONENT_ARM_DISARM => {
+                    self.armed = true;
+                    if self.acks {
+                        s.on_inbound(&ack(cmd, true), now);
+                    }
+                }
+                _ => {}
+            }
+        }
+        s.on_inbound(
+            &Inbound::Heartbeat {
+                armed: self.armed,
+                mode: self.mode,
+            },
+            now,
+        );
+        if self.odometry {
+            s.on_inbound(&odom(), now);
+        }
+    }
+}
+
+/// Runs until `until`, returning every message sent with its time.
+fn run(s: &mut Session, px4: &mut Px4, from: f64, until: f64) -> Vec<(f64, MavMessage)> {
+    let mut log = Vec::new();
+    let mut t = from;
+    while t < until {
+        let tick = s.tick(t);
+        px4.answer(s, &tick.send, t);
+        log.extend(tick.send.into_iter().map(|m| (t, m)));
+        t += DT;
+    }
+    log
+}
+
+#[test]
+fn offboard_only_after_a_second_of_streaming_then_arm_then_fly() {
+    let mut s = Session::new(LinkConfig::default(), 0.0);
+    let mut px4 = Px4::new();
+    let log = run(&mut s, &mut px4, 0.0, 3.0);
+    let first_mode = log
+        .iter()
+        .find(|(_, m)| {
+            commands(std::slice::from_ref(m))
+                .iter()
+                .any(|c| c.0 == MavCmd::MAV_CMD_DO_SET_MODE)
+        })
+        .map(|(t, _)| *t)
+        .unwrap();
+    assert!(
+        first_mode >= 1.0 - 1e-9,
+        "OFFBOARD requested at {first_mode} s"
+    );
+    let first_arm = log
+        .iter()
+        .find(|(_, m)| {
+            commands(std::slice::from_ref(m))
+                .iter()
+                .any(|c| c.0 == MavCmd::MAV_CMD_COMPONENT_ARM_DISARM)
+        })
+        .map(|(t, _)| *t)
+        .unwrap();
+    assert!(first_arm > first_mode, "arm after OFFBOARD");
+    assert_eq!(s.phase(), Phase::Flying);
+    // Heartbeats at 1 Hz.
+    let hb: Vec<f64> = log
+        .iter()
+        .filter(|(_, m)| matches!(m, MavMessage::HEARTBEAT(_)))
+        .map(|(t, _)| *t)
+        .collect();
+    assert_eq!(hb.len(), 3, "{hb:?}");
+    // Flying: the MPC is in control, no failsafe.
+    let t = s.tick(3.0);
+    assert!(t.mpc_in_control);
+    assert_eq!(t.failsafe, None);
+}
+
+#[test]
+fn unacknowledged_commands_are_retried_then_the_session_fails() {
+    let cfg = LinkConfig::default();
+    let mut s = Session::new(cfg, 0.0);
+    let mut px4 = Px4 {
+        acks: false,
+        ..Px4::new()
+    };
+    let log = run(&mut s, &mut px4, 0.0, 4.0);
+    let modes: Vec<(f64, u8)> = log
+        .iter()
+        .flat_map(|(t, m)| {
+            commands(std::slice::from_ref(m))
+                .into_iter()
+                .map(move |c| (*t, c.2))
+        })
+        .collect();
+    // The first request and `retries` retransmissions, `ack_timeout` apart, with the
+    // confirmation count going up.
+    assert_eq!(modes.len(), 1 + usize::from(cfg.retries), "{modes:?}");
+    for (i, w) in modes.windows(2).enumerate() {
+        assert!(
+            (w[1].0 - w[0].0 - cfg.ack_timeout).abs() < DT + 1e-9,
+            "{modes:?}"
+        );
+        assert_eq!(w[1].1, i as u8 + 1);
+    }
+    assert_eq!(
+        s.phase(),
+        Phase::Failed(SessionError::NoAck(MavCmd::MAV_CMD_DO_SET_MODE))
+    );
+    assert!(s.phase() != Phase::Flying);
+    let msg = SessionError::NoAck(MavCmd::MAV_CMD_DO_SET_MODE).to_string();
+    assert!(msg.contains("system 1"), "{msg}");
+}
+
+#[test]
+fn a_refused_command_fails_the_session_with_the_command_named() {
+    let mut s = Session::new(LinkConfig::default(), 0.0);
+    let _ = s.tick(0.0);
+    let t = s.tick(1.0);
+    assert_eq!(commands(&t.send).len(), 1);
+    s.on_inbound(&ack(MavCmd::MAV_CMD_DO_SET_MODE, false), 1.01);
+    assert_eq!(
+        s.phase(),
+        Phase::Failed(SessionError::Refused(MavCmd::MAV_CMD_DO_SET_MODE))
+    );
+    assert!(!s.tick(1.02).mpc_in_control);
+}
+
+fn flying() -> (Session, Px4) {
+    let mut s = Session::new(LinkConfig::default(), 0.0);
+    let mut px4 = Px4::new();
+    let _ = run(&mut s, &mut px4, 0.0, 3.0);
+    assert_eq!(s.phase(), Phase::Flying);
+    (s, px4)
+}
+
+#[test]
+fn odometry_blackout_commands_return_within_one_tick_of_the_limit() {
+    let (mut s, mut px4) = flying();
+    px4.odometry = false;
+    let lost_at = 3.0 - DT; // the last odometry
+    let mut t = 3.0;
+    let mut engaged = None;
+    while t < 4.0 {
+        let tick = s.tick(t);
+        if tick.failsafe.is_some() {
+            engaged = Some((t, tick.failsafe, commands(&tick.send)));
+            break;
+        }
+        px4.answer(&mut s, &tick.send, t);
+        t += DT;
+    }
+    let (t, f, cmds) = engaged.expect("the failsafe engaged");
+    assert_eq!(f, Some(Failsafe::OdometryLost));
+    let limit = LinkConfig::default().odometry_timeout;
+    assert!(
+        t - lost_at > limit && t - lost_at <= limit + DT + 1e-9,
+        "{t}"
+    );
+    assert_eq!(
+        cmds,
+        vec![(MavCmd::MAV_CMD_DO_SET_MODE, 4.0, 0)],
+        "AUTO.RTL"
+    );
+    assert_eq!(s.phase(), Phase::Failsafe(Failsafe::OdometryLost));
+    assert!(!s.tick(t + DT).mpc_in_control);
+}
+
+#[test]
+fn consecutive_solver_failures_command_return_intermittent_ones_do_not() {
+    let (mut s, mut px4) = flying();
+    let k = LinkConfig::default().max_solver_failures;
+    let mut t = 3.0;
+    for i in 0..(5 * k) {
+        s.on_solver(i % 2 == 0); // every other step fails: never k in a row
+        let tick = s.tick(t);
+        assert!(tick.failsafe.is_none(), "step {i}");
+        px4.answer(&mut s, &tick.send, t);
+        t += DT;
+    }
+    for i in 0..k {
+        s.on_solver(false);
+        let tick = s.tick(t);
+        if i + 1 < k {
+            assert!(tick.failsafe.is_none(), "failure {i}");
+        } else {
+            assert_eq!(tick.failsafe, Some(Failsafe::SolverFailures));
+            assert_eq!(commands(&tick.send)[0].0, MavCmd::MAV_CMD_DO_SET_MODE);
+        }
+        px4.answer(&mut s, &tick.send, t);
+        t += DT;
+    }
+}
+
+#[test]
+fn abort_lands_and_px4_leaving_offboard_is_noticed() {
+    let (mut s, _) = flying();
+    s.abort();
+    let tick = s.tick(3.0);
+    assert_eq!(tick.failsafe, Some(Failsafe::Abort));
+    // AUTO.LAND: main 4, sub 6.
+    let cmds = commands(&tick.send);
+    assert_eq!(cmds, vec![(MavCmd::MAV_CMD_DO_SET_MODE, 4.0, 0)]);
+    if let Some(MavMessage::COMMAND_LONG(c)) = tick
+        .send
+        .iter()
+        .find(|m| matches!(m, MavMessage::COMMAND_LONG(_)))
+    {
+        assert_eq!(c.param3, 6.0);
+    }
+    // The land request is retried until PX4 acknowledges it.
+    let again = s.tick(3.0 + LinkConfig::default().ack_timeout);
+    assert_eq!(commands(&again.send).len(), 1);
+
+    let (mut s, mut px4) = flying();
+    px4.mode = Px4Mode::Position; // PX4's own offboard-loss fallback
+    px4.answer(&mut s, &[], 3.0);
+    let tick = s.tick(3.0);
+    assert_eq!(tick.failsafe, Some(Failsafe::Px4LeftOffboard));
+    assert!(
+        commands(&tick.send).is_empty(),
+        "PX4 decided; we do not fight it"
+    );
+}
