@@ -11,7 +11,7 @@ use mpc_codegen::{Options, RuntimeDep};
 use mpc_sim::controller::ControllerKind;
 use mpc_sim::estimator::EstimatorConfig;
 use mpc_sim::mission::{MissionConfig, MissionKind, Phase};
-use mpc_sim::report::{self, TrialSummary};
+use mpc_sim::report;
 use mpc_sim::run::{SimConfig, TrialResult, run_trial};
 
 use crate::SimArgs;
@@ -233,7 +233,7 @@ pub(crate) fn run(args: &SimArgs) -> ExitCode {
     } else {
         ProgressBar::hidden()
     };
-    let (summaries, first) = fly_all(&configs, &bar);
+    let (summaries, first) = fly_all(&configs, &bar, run_trial, report::summarize);
     bar.finish_and_clear();
     if summaries.len() != configs.len() {
         eprintln!(
@@ -274,12 +274,24 @@ pub(crate) fn run(args: &SimArgs) -> ExitCode {
     }
 }
 
-/// Flies every configuration on all cores; returns the summaries in order and the first
+/// Flies every configuration on all cores with `fly`; returns `summarize` of each trial in
+/// order (trials that could not be flown are reported on stderr and left out) and the first
 /// trial's full result (for the log and plots).
-fn fly_all(configs: &[SimConfig], bar: &ProgressBar) -> (Vec<TrialSummary>, Option<TrialResult>) {
+pub(crate) fn fly_all<C, R, S, E>(
+    configs: &[C],
+    bar: &ProgressBar,
+    fly: impl Fn(&C) -> Result<R, E> + Sync,
+    summarize: impl Fn(&R) -> S + Sync,
+) -> (Vec<S>, Option<R>)
+where
+    C: Sync,
+    R: Send,
+    S: Send + Clone,
+    E: std::fmt::Display,
+{
     let next = AtomicUsize::new(0);
-    let out: Mutex<Vec<Option<TrialSummary>>> = Mutex::new(vec![None; configs.len()]);
-    let first: Mutex<Option<TrialResult>> = Mutex::new(None);
+    let out: Mutex<Vec<Option<S>>> = Mutex::new(vec![None; configs.len()]);
+    let first: Mutex<Option<R>> = Mutex::new(None);
     let workers = std::thread::available_parallelism()
         .map_or(1, usize::from)
         .min(configs.len())
@@ -290,25 +302,22 @@ fn fly_all(configs: &[SimConfig], bar: &ProgressBar) -> (Vec<TrialSummary>, Opti
                 loop {
                     let i = next.fetch_add(1, Ordering::Relaxed);
                     let Some(cfg) = configs.get(i) else { break };
-                    let res = match run_trial(cfg) {
-                        Ok(r) => r,
-                        Err(e) => {
-                            // Validated before flying; a draw cannot leave the ranges.
-                            eprintln!("error: trial {i}: {e}");
-                            bar.inc(1);
-                            continue;
+                    match fly(cfg) {
+                        Ok(res) => {
+                            let summary = summarize(&res);
+                            if let Ok(mut o) = out.lock()
+                                && let Some(slot) = o.get_mut(i)
+                            {
+                                *slot = Some(summary);
+                            }
+                            if i == 0
+                                && let Ok(mut f) = first.lock()
+                            {
+                                *f = Some(res);
+                            }
                         }
-                    };
-                    let summary = report::summarize(&res);
-                    if let Ok(mut o) = out.lock()
-                        && let Some(slot) = o.get_mut(i)
-                    {
-                        *slot = Some(summary);
-                    }
-                    if i == 0
-                        && let Ok(mut f) = first.lock()
-                    {
-                        *f = Some(res);
+                        // Validated before flying: a trial cannot fail to start.
+                        Err(e) => eprintln!("error: trial {i}: {e}"),
                     }
                     bar.inc(1);
                 }

@@ -2,16 +2,13 @@
 
 use std::path::Path;
 use std::process::ExitCode;
-use std::sync::Mutex;
-use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
 use indicatif::{ProgressBar, ProgressStyle};
 use mpc_sim::estimator::EstimatorConfig;
 use mpc_sim::mission::Phase;
 use mpc_sim::throw::{
-    self as th, LANDING_TOL_M, ThrowConfig, ThrowRunSummary, ThrowSimConfig, ThrowSummary,
-    ThrowTrial,
+    self as th, LANDING_TOL_M, ThrowConfig, ThrowRunSummary, ThrowSimConfig, ThrowTrial,
 };
 
 use crate::SimArgs;
@@ -124,7 +121,8 @@ pub(crate) fn run(args: &SimArgs) -> ExitCode {
         } else {
             ProgressBar::hidden()
         };
-        let (summaries, first) = fly_all(&configs, &bar);
+        let (summaries, first) =
+            crate::sim::fly_all(&configs, &bar, th::run_throw_trial, th::summarize_throw);
         bar.finish_and_clear();
         if summaries.len() != configs.len() {
             rows.push((
@@ -192,55 +190,6 @@ fn row_json(range: f64, row: &Result<ThrowRunSummary, String>) -> serde_json::Va
             "error": e,
         }),
     }
-}
-
-/// Flies every configuration on all cores; returns the summaries in order and the first
-/// trial in full.
-fn fly_all(
-    configs: &[ThrowSimConfig],
-    bar: &ProgressBar,
-) -> (Vec<ThrowSummary>, Option<ThrowTrial>) {
-    let next = AtomicUsize::new(0);
-    let out: Mutex<Vec<Option<ThrowSummary>>> = Mutex::new(vec![None; configs.len()]);
-    let first: Mutex<Option<ThrowTrial>> = Mutex::new(None);
-    let workers = std::thread::available_parallelism()
-        .map_or(1, usize::from)
-        .min(configs.len())
-        .max(1);
-    std::thread::scope(|s| {
-        for _ in 0..workers {
-            s.spawn(|| {
-                loop {
-                    let i = next.fetch_add(1, Ordering::Relaxed);
-                    let Some(cfg) = configs.get(i) else { break };
-                    match th::run_throw_trial(cfg) {
-                        Ok(res) => {
-                            let summary = th::summarize_throw(&res);
-                            if let Ok(mut o) = out.lock()
-                                && let Some(slot) = o.get_mut(i)
-                            {
-                                *slot = Some(summary);
-                            }
-                            if i == 0
-                                && let Ok(mut f) = first.lock()
-                            {
-                                *f = Some(res);
-                            }
-                        }
-                        Err(e) => eprintln!("error: trial {i}: {e}"),
-                    }
-                    bar.inc(1);
-                }
-            });
-        }
-    });
-    let summaries = out
-        .into_inner()
-        .unwrap_or_default()
-        .into_iter()
-        .flatten()
-        .collect();
-    (summaries, first.into_inner().unwrap_or_default())
 }
 
 fn write_outputs(dir: &Path, range: f64, res: &ThrowTrial, quiet: bool) -> Result<(), String> {
