@@ -16,13 +16,17 @@
 //!   and the failsafes (odometry lost, solver failures, operator abort, PX4 leaving
 //!   OFFBOARD).
 //!
-//! Not yet: the transports (UDP/serial through `mavlink::connect`), the controller loop that
-//! ties the session to a generated solver, `mpcc sitl` and `mpcc fly`.
+//! * [`transport`]: the link (udpin, udpout, serial) through `mavlink::connect`, with
+//!   non-blocking reads and typed address errors.
+//!
+//! Not yet: the controller loop that ties the session to a generated solver, `mpcc sitl`
+//! and `mpcc fly`.
 
 pub mod frames;
 pub mod link;
 pub mod messages;
 pub mod setpoint;
+pub mod transport;
 
 /// The linear-algebra crate of this crate's API.
 pub use nalgebra;
