@@ -19,13 +19,18 @@
 //! * [`transport`]: the link (udpin, udpout, serial) through `mavlink::connect`, with
 //!   non-blocking reads and typed address errors.
 //!
-//! Not yet: the controller loop that ties the session to a generated solver, `mpcc sitl`
-//! and `mpcc fly`.
+//! * [`sitl`]: the simulated PX4's commander (PX4's offboard rules: OFFBOARD only while
+//!   setpoints stream, arming checks, the offboard-loss failsafe, automatic disarm after an
+//!   AUTO landing, double acknowledgement of mode changes), for `mpcc sitl`.
+//!
+//! Not yet: the vehicle physics and the UDP endpoint around the commander (`mpcc sitl`), the
+//! controller loop that ties the session to a generated solver, `mpcc fly`.
 
 pub mod frames;
 pub mod link;
 pub mod messages;
 pub mod setpoint;
+pub mod sitl;
 pub mod transport;
 
 /// The linear-algebra crate of this crate's API.

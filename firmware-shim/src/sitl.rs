@@ -1,0 +1,246 @@
+//! The simulated PX4's commander: PX4's offboard rules as a state machine clocked by the
+//! caller, for `mpcc sitl` (the vehicle physics and the UDP endpoint around it are the next
+//! step). It decides what PX4 would: which mode it is in, whether it is armed, which
+//! commands it accepts (and acknowledges, twice for a mode change as PX4 v1.16 did), and when
+//! it leaves OFFBOARD because the setpoint stream stopped.
+//!
+//! Rules (PX4 v1.16 as observed, `shared/anchors/PX4_OFFBOARD.md`, and PX4's commander):
+//!
+//! * OFFBOARD is accepted only while setpoints stream: the last valid SET_ATTITUDE_TARGET
+//!   (finite, thrust in [0, 1], attitude ignored) is younger than
+//!   [`CommanderConfig::offboard_loss_timeout`]; otherwise the mode command is
+//!   TEMPORARILY_REJECTED.
+//! * Arming needs a valid pose and the vehicle on the ground; disarming needs it on the
+//!   ground (no forced disarm here).
+//! * In OFFBOARD, a stream silent for longer than the offboard-loss timeout (0.5 s here, the
+//!   issue's figure; PX4's COM_OF_LOSS_T defaults to 1.0 s) is a failsafe: position hold
+//!   (POSCTL, COM_OBL_RC_ACT = 0) with the failsafe flagged.
+//! * AUTO.LAND and AUTO.RTL disarm on their own after touchdown.
+//! * The mode shows in the 1 Hz HEARTBEAT (`custom_mode`), so a client sees it late.
+
+use mavlink::dialects::common::{
+    self as mc, MavAutopilot, MavCmd, MavMessage, MavModeFlag, MavResult, MavState, MavType,
+};
+
+use crate::messages::Px4Mode;
+
+/// Timing of the simulated PX4.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CommanderConfig {
+    /// A stream silent this long ends OFFBOARD [s].
+    pub offboard_loss_timeout: f64,
+    /// HEARTBEAT period [s].
+    pub heartbeat_period: f64,
+}
+
+impl Default for CommanderConfig {
+    /// Offboard loss 0.5 s, heartbeat 1 s.
+    fn default() -> Self {
+        Self {
+            offboard_loss_timeout: 0.5,
+            heartbeat_period: 1.0,
+        }
+    }
+}
+
+/// A rate + thrust setpoint as PX4 received it (FRD rates, normalized thrust).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RateSetpoint {
+    /// Body rates FRD [rad/s].
+    pub rates_frd: [f32; 3],
+    /// Normalized thrust [0, 1].
+    pub thrust: f32,
+}
+
+/// What the vehicle around the commander reports at each tick.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct VehicleStatus {
+    /// Whether the estimator has a valid pose (arming check).
+    pub pose_valid: bool,
+    /// Whether the vehicle is on the ground.
+    pub landed: bool,
+}
+
+/// Who flies the vehicle now.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Control {
+    /// Motors off.
+    Disarmed,
+    /// The offboard setpoint.
+    Offboard(RateSetpoint),
+    /// PX4's own position controller: hold, land or return.
+    Px4(Px4Mode),
+}
+
+/// The simulated PX4 commander.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Commander {
+    cfg: CommanderConfig,
+    mode: Px4Mode,
+    armed: bool,
+    last_setpoint: Option<(f64, RateSetpoint)>,
+    last_heartbeat: Option<f64>,
+    failsafe_at: Option<f64>,
+    status: VehicleStatus,
+}
+
+impl Commander {
+    /// A disarmed vehicle on the ground in POSCTL.
+    pub fn new(cfg: CommanderConfig) -> Self {
+        Self {
+            cfg,
+            mode: Px4Mode::Position,
+            armed: false,
+            last_setpoint: None,
+            last_heartbeat: None,
+            failsafe_at: None,
+            status: VehicleStatus {
+                pose_valid: true,
+                landed: true,
+            },
+        }
+    }
+
+    /// The current mode.
+    pub fn mode(&self) -> Px4Mode {
+        self.mode
+    }
+
+    /// Whether armed.
+    pub fn armed(&self) -> bool {
+        self.armed
+    }
+
+    /// When the offboard-loss failsafe engaged, if it did.
+    pub fn failsafe_at(&self) -> Option<f64> {
+        self.failsafe_at
+    }
+
+    fn streaming(&self, now: f64) -> bool {
+        self.last_setpoint
+            .is_some_and(|(t, _)| now - t <= self.cfg.offboard_loss_timeout)
+    }
+
+    fn ack(command: MavCmd, result: MavResult) -> MavMessage {
+        MavMessage::COMMAND_ACK(mc::COMMAND_ACK_DATA { command, result })
+    }
+
+    /// Handles a message from the companion at time `now`; returns PX4's answers.
+    pub fn on_message(&mut self, msg: &MavMessage, now: f64) -> Vec<MavMessage> {
+        match msg {
+            MavMessage::SET_ATTITUDE_TARGET(s) => {
+                let attitude_ignored = s
+                    .type_mask
+                    .contains(mc::AttitudeTargetTypemask::ATTITUDE_TARGET_TYPEMASK_ATTITUDE_IGNORE);
+                let rates = [s.body_roll_rate, s.body_pitch_rate, s.body_yaw_rate];
+                let valid = attitude_ignored
+                    && rates.iter().all(|r| r.is_finite())
+                    && s.thrust.is_finite()
+                    && (0.0..=1.0).contains(&s.thrust);
+                if valid {
+                    self.last_setpoint = Some((
+                        now,
+                        RateSetpoint {
+                            rates_frd: rates,
+                            thrust: s.thrust,
+                        },
+                    ));
+                }
+                Vec::new()
+            }
+            MavMessage::COMMAND_LONG(c) => self.on_command(c, now),
+            _ => Vec::new(),
+        }
+    }
+
+    fn on_command(&mut self, c: &mc::COMMAND_LONG_DATA, now: f64) -> Vec<MavMessage> {
+        let reply = |r| vec![Self::ack(c.command, r)];
+        match c.command {
+            MavCmd::MAV_CMD_DO_SET_MODE => {
+                let mode = Px4Mode::from_custom_mode(
+                    (u32::from(c.param2 as u8) << 16) | (u32::from(c.param3 as u8) << 24),
+                );
+                let result = match mode {
+                    Px4Mode::Offboard if !self.streaming(now) => {
+                        MavResult::MAV_RESULT_TEMPORARILY_REJECTED
+                    }
+                    Px4Mode::Other(..) => MavResult::MAV_RESULT_UNSUPPORTED,
+                    m => {
+                        self.mode = m;
+                        MavResult::MAV_RESULT_ACCEPTED
+                    }
+                };
+                // PX4 v1.16 acknowledged a mode change twice.
+                let a = Self::ack(c.command, result);
+                vec![a.clone(), a]
+            }
+            MavCmd::MAV_CMD_COMPONENT_ARM_DISARM => {
+                if c.param1 == 1.0 {
+                    if self.status.pose_valid && self.status.landed {
+                        self.armed = true;
+                        reply(MavResult::MAV_RESULT_ACCEPTED)
+                    } else {
+                        reply(MavResult::MAV_RESULT_DENIED)
+                    }
+                } else if self.status.landed {
+                    self.armed = false;
+                    reply(MavResult::MAV_RESULT_ACCEPTED)
+                } else {
+                    reply(MavResult::MAV_RESULT_DENIED)
+                }
+            }
+            MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL => reply(MavResult::MAV_RESULT_ACCEPTED),
+            _ => reply(MavResult::MAV_RESULT_UNSUPPORTED),
+        }
+    }
+
+    /// One step at `now` with the vehicle's `status`: applies the failsafes and the automatic
+    /// disarm; returns who flies and the messages PX4 sends now (the HEARTBEAT when due).
+    pub fn tick(&mut self, now: f64, status: VehicleStatus) -> (Control, Vec<MavMessage>) {
+        self.status = status;
+        if self.mode == Px4Mode::Offboard && !self.streaming(now) {
+            self.mode = Px4Mode::Position;
+            self.failsafe_at.get_or_insert(now);
+        }
+        if self.armed && status.landed && matches!(self.mode, Px4Mode::Land | Px4Mode::Return) {
+            self.armed = false;
+        }
+        let mut out = Vec::new();
+        if self
+            .last_heartbeat
+            .is_none_or(|t| now - t >= self.cfg.heartbeat_period)
+        {
+            self.last_heartbeat = Some(now);
+            out.push(self.heartbeat());
+        }
+        let control = if !self.armed {
+            Control::Disarmed
+        } else {
+            match (self.mode, self.last_setpoint) {
+                (Px4Mode::Offboard, Some((_, sp))) => Control::Offboard(sp),
+                (m, _) => Control::Px4(m),
+            }
+        };
+        (control, out)
+    }
+
+    /// PX4's HEARTBEAT now.
+    pub fn heartbeat(&self) -> MavMessage {
+        let mut base = MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED;
+        if self.armed {
+            base |= MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED;
+        }
+        MavMessage::HEARTBEAT(mc::HEARTBEAT_DATA {
+            custom_mode: self.mode.custom_mode(),
+            mavtype: MavType::MAV_TYPE_QUADROTOR,
+            autopilot: MavAutopilot::MAV_AUTOPILOT_PX4,
+            base_mode: base,
+            system_status: if self.armed {
+                MavState::MAV_STATE_ACTIVE
+            } else {
+                MavState::MAV_STATE_STANDBY
+            },
+            mavlink_version: 3,
+        })
+    }
+}

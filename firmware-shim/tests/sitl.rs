@@ -1,0 +1,218 @@
+//! The simulated PX4's commander against PX4's offboard rules, and the shim's session
+//! talking to it through real MAVLink frames (encoded and decoded), without physics.
+
+use firmware_shim::link::{Failsafe, LinkConfig, Phase, Session};
+use firmware_shim::messages::{self, Inbound, OdometryNed, Px4Mode, classify, decode, encode};
+use firmware_shim::sitl::{Commander, CommanderConfig, Control, VehicleStatus};
+use mavlink::MavHeader;
+use mavlink::dialects::common::{MavMessage, MavResult};
+
+const GROUND: VehicleStatus = VehicleStatus {
+    pose_valid: true,
+    landed: true,
+};
+const AIR: VehicleStatus = VehicleStatus {
+    pose_valid: true,
+    landed: false,
+};
+
+fn results(out: &[MavMessage]) -> Vec<MavResult> {
+    out.iter()
+        .filter_map(|m| match m {
+            MavMessage::COMMAND_ACK(a) => Some(a.result),
+            _ => None,
+        })
+        .collect()
+}
+
+fn mode(m: Px4Mode) -> MavMessage {
+    messages::command_long(messages::Command::SetMode(m), 0)
+}
+
+#[test]
+fn offboard_needs_a_live_stream_and_acks_come_twice() {
+    let mut px4 = Commander::new(CommanderConfig::default());
+    assert_eq!(
+        results(&px4.on_message(&mode(Px4Mode::Offboard), 0.0)),
+        [MavResult::MAV_RESULT_TEMPORARILY_REJECTED; 2]
+    );
+    assert_eq!(px4.mode(), Px4Mode::Position);
+    // Invalid setpoints do not count as a stream.
+    for bad in [
+        messages::set_attitude_target([0.0; 3], f32::NAN, 0),
+        messages::set_attitude_target([0.0; 3], 1.5, 0),
+        messages::set_attitude_target([f32::INFINITY, 0.0, 0.0], 0.5, 0),
+    ] {
+        px4.on_message(&bad, 0.1);
+    }
+    assert_eq!(
+        results(&px4.on_message(&mode(Px4Mode::Offboard), 0.2)),
+        [MavResult::MAV_RESULT_TEMPORARILY_REJECTED; 2]
+    );
+    px4.on_message(&messages::set_attitude_target([0.0; 3], 0.0, 0), 0.3);
+    assert_eq!(
+        results(&px4.on_message(&mode(Px4Mode::Offboard), 0.4)),
+        [MavResult::MAV_RESULT_ACCEPTED; 2]
+    );
+    assert_eq!(px4.mode(), Px4Mode::Offboard);
+    // The heartbeat shows it.
+    let hb = px4.heartbeat();
+    let header = MavHeader {
+        system_id: 1,
+        component_id: 1,
+        sequence: 0,
+    };
+    assert_eq!(
+        classify(&header, &hb),
+        Inbound::Heartbeat {
+            armed: false,
+            mode: Px4Mode::Offboard
+        }
+    );
+}
+
+#[test]
+fn arming_checks_and_auto_disarm_after_landing() {
+    let mut px4 = Commander::new(CommanderConfig::default());
+    let arm = messages::command_long(messages::Command::Arm, 0);
+    px4.tick(
+        0.0,
+        VehicleStatus {
+            pose_valid: false,
+            landed: true,
+        },
+    );
+    assert_eq!(
+        results(&px4.on_message(&arm, 0.0)),
+        [MavResult::MAV_RESULT_DENIED]
+    );
+    px4.tick(0.1, GROUND);
+    assert_eq!(
+        results(&px4.on_message(&arm, 0.1)),
+        [MavResult::MAV_RESULT_ACCEPTED]
+    );
+    assert!(px4.armed());
+    // In the air: no disarm.
+    px4.tick(1.0, AIR);
+    let disarm = messages::command_long(messages::Command::Disarm, 0);
+    assert_eq!(
+        results(&px4.on_message(&disarm, 1.0)),
+        [MavResult::MAV_RESULT_DENIED]
+    );
+    // AUTO.LAND: PX4 flies, then disarms on its own at touchdown.
+    px4.on_message(&mode(Px4Mode::Land), 1.1);
+    assert_eq!(px4.tick(1.2, AIR).0, Control::Px4(Px4Mode::Land));
+    assert_eq!(px4.tick(5.0, GROUND).0, Control::Disarmed);
+    assert!(!px4.armed());
+}
+
+#[test]
+fn a_silent_stream_in_offboard_is_the_offboard_loss_failsafe() {
+    let cfg = CommanderConfig::default();
+    let mut px4 = Commander::new(cfg);
+    px4.tick(0.0, GROUND);
+    let sp = messages::set_attitude_target([0.1, 0.0, 0.0], 0.6, 0);
+    px4.on_message(&sp, 0.0);
+    px4.on_message(&mode(Px4Mode::Offboard), 0.0);
+    px4.on_message(&messages::command_long(messages::Command::Arm, 0), 0.0);
+    let mut t = 0.0;
+    while t < 2.0 {
+        px4.on_message(&sp, t);
+        let (c, _) = px4.tick(t, AIR);
+        assert!(
+            matches!(c, Control::Offboard(s) if s.thrust == 0.6),
+            "{c:?}"
+        );
+        t += 0.01;
+    }
+    // The controller dies at 2.0 s: PX4 holds position after the timeout, not before.
+    let last = t - 0.01;
+    while t < 3.0 {
+        let (c, _) = px4.tick(t, AIR);
+        if t - last <= cfg.offboard_loss_timeout {
+            assert!(matches!(c, Control::Offboard(_)), "at {t}");
+        } else {
+            assert_eq!(c, Control::Px4(Px4Mode::Position), "at {t}");
+        }
+        t += 0.01;
+    }
+    let at = px4.failsafe_at().expect("the failsafe engaged");
+    assert!(
+        at - last > cfg.offboard_loss_timeout && at - last <= cfg.offboard_loss_timeout + 0.011
+    );
+    // Back in OFFBOARD needs a new request with a live stream.
+    px4.on_message(&sp, 3.0);
+    assert_eq!(px4.tick(3.0, AIR).0, Control::Px4(Px4Mode::Position));
+}
+
+/// The shim's session and the simulated commander, exchanging encoded MAVLink frames: the
+/// session reaches Flying; when the controller stops streaming, the commander fails safe and
+/// the session notices PX4 left OFFBOARD.
+#[test]
+fn the_session_flies_the_simulated_px4_and_notices_its_failsafe() {
+    let mut px4 = Commander::new(CommanderConfig::default());
+    let mut s = Session::new(LinkConfig::default(), 0.0);
+    let px4_header = MavHeader {
+        system_id: 1,
+        component_id: 1,
+        sequence: 0,
+    };
+    let odom = Inbound::Odometry(OdometryNed {
+        time_us: 0,
+        position: [0.0; 3],
+        velocity: [0.0; 3],
+        q: [1.0, 0.0, 0.0, 0.0],
+        rates: [0.0; 3],
+    });
+    let wire = |m: &MavMessage, h: MavHeader| decode(&encode(h, m).unwrap()).unwrap();
+    let dt = 0.02;
+    let mut t = 0.0;
+    let mut streaming = true;
+    let mut flying_at = None;
+    let mut noticed = None;
+    while t < 12.0 {
+        let tick = s.tick(t);
+        let mut to_px4 = tick.send.clone();
+        if streaming {
+            to_px4.push(messages::set_attitude_target([0.0; 3], 0.5, 0));
+        }
+        let mut from_px4 = Vec::new();
+        for m in &to_px4 {
+            let (_, m) = wire(m, messages::our_header(1, 0));
+            from_px4.extend(px4.on_message(&m, t));
+        }
+        let status = if px4.armed() { AIR } else { GROUND };
+        let (_, out) = px4.tick(t, status);
+        from_px4.extend(out);
+        for m in &from_px4 {
+            let (h, m) = wire(m, px4_header);
+            s.on_inbound(&classify(&h, &m), t);
+        }
+        s.on_inbound(&odom, t);
+        if s.phase() == Phase::Flying && flying_at.is_none() {
+            flying_at = Some(t);
+        }
+        if flying_at.is_some_and(|f| t - f > 2.0) {
+            streaming = false; // the controller process dies
+        }
+        if tick.failsafe == Some(Failsafe::Px4LeftOffboard) {
+            noticed = Some(t);
+            break;
+        }
+        t += dt;
+    }
+    let flying_at = flying_at.expect("the session reached Flying");
+    assert!(flying_at >= 1.0, "OFFBOARD only after 1 s of streaming");
+    assert!(px4.armed());
+    let failsafe = px4.failsafe_at().expect("the commander failed safe");
+    let noticed = noticed.expect("the session noticed");
+    // The commander within the timeout (+ a step) of the last setpoint; the session at the
+    // next heartbeat (1 Hz).
+    let stopped = flying_at + 2.0;
+    assert!(
+        failsafe - stopped <= 0.5 + 2.0 * dt + 1e-9,
+        "{failsafe} vs {stopped}"
+    );
+    assert!(noticed >= failsafe && noticed - failsafe <= 1.0 + dt + 1e-9);
+    assert_eq!(px4.mode(), Px4Mode::Position);
+}
