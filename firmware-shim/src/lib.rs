@@ -23,8 +23,12 @@
 //!   setpoints stream, arming checks, the offboard-loss failsafe, automatic disarm after an
 //!   AUTO landing, double acknowledgement of mode changes), for `mpcc sitl`.
 //!
-//! Not yet: the vehicle physics and the UDP endpoint around the commander (`mpcc sitl`), the
-//! controller loop that ties the session to a generated solver, `mpcc fly`.
+//! * [`vehicle`]: the simulated PX4 vehicle: the commander around the simulator's plant and
+//!   rate loop, flown by the offboard setpoint or by a PX4-like position controller (hold,
+//!   land, return), sending ODOMETRY, HEARTBEAT and EXTENDED_SYS_STATE in PX4's frames.
+//!
+//! Not yet: the UDP endpoint around the vehicle (`mpcc sitl`), the controller loop that
+//! ties the session to a generated solver, `mpcc fly`.
 
 pub mod frames;
 pub mod link;
@@ -32,6 +36,7 @@ pub mod messages;
 pub mod setpoint;
 pub mod sitl;
 pub mod transport;
+pub mod vehicle;
 
 /// The linear-algebra crate of this crate's API.
 pub use nalgebra;
