@@ -17,7 +17,7 @@ use std::sync::atomic::{AtomicU8, Ordering};
 use mavlink::dialects::common::MavMessage;
 use mavlink::{MavConnection, MavHeader};
 
-use crate::messages::our_header;
+use crate::messages::COMPANION_COMPONENT;
 
 /// Why a link could not be opened or used.
 #[derive(Debug, thiserror::Error)]
@@ -139,6 +139,7 @@ pub struct Link {
     conn: mavlink::Connection<MavMessage>,
     address: String,
     system_id: u8,
+    component_id: u8,
     sequence: AtomicU8,
 }
 
@@ -149,6 +150,19 @@ impl Link {
     /// # Errors
     /// [`TransportError::Open`] if the socket or port cannot be opened.
     pub fn open(address: &Address, system_id: u8) -> Result<Self, TransportError> {
+        Self::open_as(address, system_id, COMPANION_COMPONENT)
+    }
+
+    /// Opens `address` sending as `system_id` / `component_id` (the simulated PX4 sends as
+    /// 1 / 1, the autopilot).
+    ///
+    /// # Errors
+    /// [`TransportError::Open`] if the socket or port cannot be opened.
+    pub fn open_as(
+        address: &Address,
+        system_id: u8,
+        component_id: u8,
+    ) -> Result<Self, TransportError> {
         let s = address.to_string();
         let open_err = |source| TransportError::Open {
             address: s.clone(),
@@ -160,6 +174,7 @@ impl Link {
             conn,
             address: s,
             system_id,
+            component_id,
             sequence: AtomicU8::new(0),
         })
     }
@@ -169,7 +184,7 @@ impl Link {
         &self.address
     }
 
-    /// Sends `msg` with our header and the next sequence number.
+    /// Sends `msg` with this link's system and component ids and the next sequence number.
     ///
     /// # Errors
     /// [`TransportError::Send`] if the crate cannot send (e.g. a `udpin` link that has not
@@ -177,7 +192,14 @@ impl Link {
     pub fn send(&self, msg: &MavMessage) -> Result<(), TransportError> {
         let seq = self.sequence.fetch_add(1, Ordering::Relaxed);
         self.conn
-            .send(&our_header(self.system_id, seq), msg)
+            .send(
+                &MavHeader {
+                    system_id: self.system_id,
+                    component_id: self.component_id,
+                    sequence: seq,
+                },
+                msg,
+            )
             .map(|_| ())
             .map_err(|e| TransportError::Send {
                 address: self.address.clone(),

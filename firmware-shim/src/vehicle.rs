@@ -281,3 +281,41 @@ fn odometry(e: &Estimate, t: f64) -> MavMessage {
         ..mc::ODOMETRY_DATA::DEFAULT
     })
 }
+
+/// Serves `vehicle` on `link` in real time (the vehicle's clock follows the wall clock in
+/// 4 ms steps, as PX4's SIH at 250 Hz) until `duration` seconds have passed or `stop` is
+/// set: what arrives is handled at once, what the vehicle sends goes out as it is produced.
+/// Sending before anyone has been heard on a `udpin` link fails; such messages are dropped
+/// (PX4 does the same until a client appears). Returns the number of messages received.
+pub fn serve(
+    link: &crate::transport::Link,
+    vehicle: &mut SimVehicle,
+    duration: f64,
+    stop: &std::sync::atomic::AtomicBool,
+) -> usize {
+    use std::time::{Duration, Instant};
+    const TICK: f64 = 0.004;
+    let start = Instant::now();
+    let t0 = vehicle.time();
+    let mut received = 0;
+    while !stop.load(std::sync::atomic::Ordering::Relaxed) {
+        let now = start.elapsed().as_secs_f64();
+        if now >= duration {
+            break;
+        }
+        while let Some((_, msg)) = link.try_recv() {
+            received += 1;
+            for reply in vehicle.handle(&msg) {
+                let _ = link.send(&reply);
+            }
+        }
+        // Catch up with the wall clock, 4 ms at a time.
+        while vehicle.time() - t0 + TICK <= now + 1e-9 {
+            for m in vehicle.step(TICK) {
+                let _ = link.send(&m);
+            }
+        }
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    received
+}
