@@ -647,6 +647,12 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
             });
         }
     }
+    // Only the u_prev entries change: the weights are evaluated again only if they read them.
+    let weights_again = if l.weights_use_u_prev {
+        quote!(let _ = self.update_weights();)
+    } else {
+        quote!()
+    };
     let (x0_aug, rate_update, guess_aug) = match &l.u_prev {
         Some(idx) => {
             let pairs = idx.iter().enumerate().map(|(i, &pi)| {
@@ -670,8 +676,11 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
                         for k in 0..=N {
                             let mut p = self.p[k];
                             #(#upd)*
-                            let _ = self.set_param(k, &p.into());
+                            if self.rti.set_param(k, &p).is_ok() {
+                                self.p[k] = p;
+                            }
                         }
+                        #weights_again
                     }
                 },
                 quote!(#(#g)*),

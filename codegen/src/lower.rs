@@ -174,6 +174,9 @@ pub struct Lowered {
     pub params: Vec<Named>,
     /// With an input-rate cost: the parameter entries holding `u_{-1}` (one per control).
     pub u_prev: Option<Vec<usize>>,
+    /// Whether the weights depend on the `u_prev` parameters (then the automatic update after
+    /// each feedback re-evaluates them).
+    pub weights_use_u_prev: bool,
 }
 
 fn named(vars: &[Variable<'_>], per_stage: impl Fn(usize) -> bool) -> Vec<Named> {
@@ -559,7 +562,7 @@ pub fn lower<'g>(ocp: &Ocp<'g>) -> Result<Lowered, CodegenError> {
             },
             other => other,
         })?;
-    let weights = b.function("weights", &[Arg::P], wout)?;
+    let weights = b.function("weights", &[Arg::P], wout.clone())?;
 
     // ---- constraints --------------------------------------------------------------------
     let mut h = Vec::new();
@@ -655,8 +658,30 @@ pub fn lower<'g>(ocp: &Ocp<'g>) -> Result<Lowered, CodegenError> {
         }
         None => None,
     };
+    // Whether the weights read the input-rate term's u_{-1}: if not, the automatic u_prev
+    // update after each feedback need not re-evaluate them.
+    let weights_use_u_prev = match &u_prev {
+        Some(idx) => {
+            let without: Vec<Expr<'_>> = ocp
+                .parameters
+                .iter()
+                .filter(|q| q.kind == ParamKind::Global)
+                .flat_map(|q| q.var.symbols.iter().copied())
+                .filter(|s| !idx.iter().any(|&i| p.get(i) == Some(s)))
+                .collect();
+            let bu = Builder {
+                g,
+                x: Vec::new(),
+                u: Vec::new(),
+                p: without,
+            };
+            bu.function("weights", &[Arg::P], wout).is_err()
+        }
+        None => false,
+    };
     Ok(Lowered {
         name: ocp.name.clone(),
+        weights_use_u_prev,
         nx_model: nxm,
         nx,
         nu,
