@@ -2,6 +2,9 @@
 
 use serde::Serialize;
 
+use crate::controller::OuterStats;
+use crate::plant::QuadState;
+
 /// One row of the closed-loop log (and of the CSV file, in this column order).
 ///
 /// Angles in rad, rates in rad/s, positions in m (world ENU), thrust in N. Solver columns are
@@ -76,4 +79,37 @@ pub struct Sample {
     pub qp_iterations: f64,
     /// Whether the solver fell back to the previous plan at this step.
     pub fallback: bool,
+}
+
+impl Sample {
+    /// A row at time `t` with the true state `s`, the rotor thrusts `rotors` [N] and the
+    /// outer loop's `stats` if it ran at this step; the mission and command columns are zero
+    /// (set them with struct update syntax).
+    pub fn at(t: f64, s: &QuadState, rotors: [f64; 4], stats: Option<OuterStats>) -> Self {
+        Self {
+            t,
+            x: s.p.x,
+            y: s.p.y,
+            z: s.p.z,
+            vx: s.v.x,
+            vy: s.v.y,
+            vz: s.v.z,
+            qw: s.q.w,
+            qx: s.q.i,
+            qy: s.q.j,
+            qz: s.q.k,
+            wx: s.w.x,
+            wy: s.w.y,
+            wz: s.w.z,
+            thrust: rotors.iter().sum(),
+            f1: rotors[0],
+            f2: rotors[1],
+            f3: rotors[2],
+            f4: rotors[3],
+            solver_us: stats.map_or(f64::NAN, |s| s.solver_us),
+            qp_iterations: stats.map_or(f64::NAN, |s| f64::from(s.qp_iterations)),
+            fallback: stats.is_some_and(|s| s.fallback),
+            ..Self::default()
+        }
+    }
 }

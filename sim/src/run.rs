@@ -275,40 +275,19 @@ pub fn run_trial(cfg: &SimConfig) -> Result<TrialResult, SimError> {
         let stats = pending.take();
         let fs = plant.rotor_thrusts();
         samples.push(Sample {
-            t,
             phase: phase.index(),
             failsafe: mission.failsafe_since().is_some(),
             pose_valid: e.pose_valid,
-            x: truth.p.x,
-            y: truth.p.y,
-            z: truth.p.z,
             x_ref: r.p.x,
             y_ref: r.p.y,
             z_ref: r.p.z,
-            vx: truth.v.x,
-            vy: truth.v.y,
-            vz: truth.v.z,
-            qw: truth.q.w,
-            qx: truth.q.i,
-            qy: truth.q.j,
-            qz: truth.q.k,
             pitch_turned,
-            wx: truth.w.x,
-            wy: truth.w.y,
-            wz: truth.w.z,
             wx_cmd: cmd.rates.x,
             wy_cmd: cmd.rates.y,
             wz_cmd: cmd.rates.z,
             wy_ref: r.rate.y,
             thrust_cmd,
-            thrust: fs.iter().sum(),
-            f1: fs[0],
-            f2: fs[1],
-            f3: fs[2],
-            f4: fs[3],
-            solver_us: stats.map_or(f64::NAN, |s| s.solver_us),
-            qp_iterations: stats.map_or(f64::NAN, |s| f64::from(s.qp_iterations)),
-            fallback: stats.is_some_and(|s| s.fallback),
+            ..Sample::at(t, &truth, fs, stats)
         });
         if landed_at.is_some_and(|tl| t - tl > 0.5) {
             outcome = Outcome::Landed;

@@ -53,7 +53,7 @@ use rand::rngs::StdRng;
 use rand_distr::{Distribution, Normal};
 use serde::Serialize;
 
-use crate::controller::aligned;
+use crate::controller::{OuterStats, aligned};
 use crate::estimator::{Estimate, Estimator, EstimatorConfig};
 use crate::log::Sample;
 use crate::mission::{G, Phase, RefPoint, Segment};
@@ -798,7 +798,7 @@ impl ThrowController {
         est: &Estimate,
         swing: ([f64; 2], [f64; 2]),
         sched: &Schedule<'_>,
-    ) -> (f64, u32, bool) {
+    ) -> OuterStats {
         let start = Instant::now();
         let q = aligned(&est.q, &self.plan_q(usize::from(self.started)));
         let (ang, dang) = if self.released {
@@ -857,11 +857,11 @@ impl ThrowController {
         };
         self.u = self.solver.u0();
         self.started = true;
-        (
-            start.elapsed().as_secs_f64() * 1e6,
-            info.qp.iterations,
-            info.status == pm::RtiStatus::UsedPreviousPlan,
-        )
+        OuterStats {
+            solver_us: start.elapsed().as_secs_f64() * 1e6,
+            qp_iterations: info.qp.iterations,
+            fallback: info.status == pm::RtiStatus::UsedPreviousPlan,
+        }
     }
 }
 
@@ -1101,40 +1101,17 @@ pub fn run_throw_trial(cfg: &ThrowSimConfig) -> Result<ThrowTrial, ThrowError> {
         let stats = pending.take();
         let fs = plant.rotor_thrusts();
         samples.push(Sample {
-            t,
             phase: phase.index(),
-            failsafe: false,
             pose_valid: e.pose_valid,
-            x: truth.p.x,
-            y: truth.p.y,
-            z: truth.p.z,
             x_ref: rp.x,
             y_ref: rp.y,
             z_ref: rp.z,
-            vx: truth.v.x,
-            vy: truth.v.y,
-            vz: truth.v.z,
-            qw: truth.q.w,
-            qx: truth.q.i,
-            qy: truth.q.j,
-            qz: truth.q.k,
             pitch_turned,
-            wx: truth.w.x,
-            wy: truth.w.y,
-            wz: truth.w.z,
             wx_cmd: ctrl.u[1],
             wy_cmd: ctrl.u[2],
             wz_cmd: ctrl.u[3],
-            wy_ref: 0.0,
             thrust_cmd,
-            thrust: fs.iter().sum(),
-            f1: fs[0],
-            f2: fs[1],
-            f3: fs[2],
-            f4: fs[3],
-            solver_us: stats.map_or(f64::NAN, |s| s.0),
-            qp_iterations: stats.map_or(f64::NAN, |s| f64::from(s.1)),
-            fallback: stats.is_some_and(|s| s.2),
+            ..Sample::at(t, &truth, fs, stats)
         });
         if i % 10 == 0
             && let Some(p) = plant.probe()
