@@ -186,7 +186,7 @@ impl Px4Setpoint {
         };
         Self {
             rates_frd: [0.0; 3],
-            thrust: clamp_f32(hover as f32, 0.0, 1.0).0,
+            thrust: clamp(hover as f32, 0.0, 1.0).0,
         }
     }
 
@@ -209,18 +209,7 @@ pub struct Sanitized {
 
 /// `x` limited to `[lo, hi]` (with `lo <= hi`, both non-NaN), and whether it was changed.
 /// A NaN `x` becomes `lo`.
-fn clamp_f64(x: f64, lo: f64, hi: f64) -> (f64, bool) {
-    if x > hi {
-        (hi, true)
-    } else if x >= lo {
-        (x, false)
-    } else {
-        (lo, true)
-    }
-}
-
-/// [`clamp_f64`] for `f32`.
-fn clamp_f32(x: f32, lo: f32, hi: f32) -> (f32, bool) {
+fn clamp<T: PartialOrd + Copy>(x: T, lo: T, hi: T) -> (T, bool) {
     if x > hi {
         (hi, true)
     } else if x >= lo {
@@ -269,12 +258,12 @@ pub fn make_setpoint(
         let frd = flu_to_frd(rates_flu);
         let mut rates = [0.0_f32; 3];
         for ((out, value), bound) in rates.iter_mut().zip([frd.x, frd.y, frd.z]).zip(bounds) {
-            let (r, hit) = clamp_f64(value, -bound, bound);
+            let (r, hit) = clamp(value, -bound, bound);
             clamped |= hit;
             *out = r as f32;
         }
         // thrust may be +-inf (finite c, tiny g): clamping handles it.
-        let (t, hit) = clamp_f64(thrust, 0.0, 1.0);
+        let (t, hit) = clamp(thrust, 0.0, 1.0);
         clamped |= hit;
         Some(Px4Setpoint {
             rates_frd: rates,
@@ -293,11 +282,11 @@ pub fn make_setpoint(
     let mut setpoint = candidate;
     for (r, bound) in setpoint.rates_frd.iter_mut().zip(bounds) {
         let b = bound as f32;
-        let (v, hit) = clamp_f32(*r, -b, b);
+        let (v, hit) = clamp(*r, -b, b);
         clamped |= hit;
         *r = v;
     }
-    let (t, hit) = clamp_f32(setpoint.thrust, 0.0, 1.0);
+    let (t, hit) = clamp(setpoint.thrust, 0.0, 1.0);
     clamped |= hit;
     setpoint.thrust = t;
 
