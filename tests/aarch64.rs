@@ -9,13 +9,14 @@
 //! qemu's user-mode emulator (Debian: `apt-get install -y qemu-user`): without them the test
 //! fails with what to install, it never skips. `.ci/run` installs them.
 
-use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
 use serde_json::Value;
+
+mod common;
 
 const TARGET: &str = "aarch64-unknown-linux-gnu";
 const LINKER: &str = "aarch64-linux-gnu-gcc";
@@ -174,34 +175,14 @@ fn run(mut cmd: Command, what: &str) -> Run {
         .stderr(Stdio::piped())
         .spawn()
         .unwrap_or_else(|e| panic!("{what} does not start ({e}): {INSTALL}"));
-    let mut stdout = child.stdout.take().expect("piped stdout");
-    let mut stderr = child.stderr.take().expect("piped stderr");
-    let out = std::thread::spawn(move || {
-        let mut s = String::new();
-        let _ = stdout.read_to_string(&mut s);
-        s
-    });
-    let err = std::thread::spawn(move || {
-        let mut s = String::new();
-        let _ = stderr.read_to_string(&mut s);
-        s
-    });
-    let start = Instant::now();
-    let status = loop {
-        if let Some(status) = child.try_wait().expect("wait for the child") {
-            break status;
-        }
-        if start.elapsed() > QEMU_TIMEOUT {
-            let _ = child.kill();
-            let _ = child.wait();
-            panic!("{what} timed out after {QEMU_TIMEOUT:?}");
-        }
-        std::thread::sleep(Duration::from_millis(20));
+    let done = common::wait_with_timeout(&mut child, QEMU_TIMEOUT);
+    let Some(status) = done.status else {
+        panic!("{what} timed out after {QEMU_TIMEOUT:?}");
     };
     Run {
         code: status.code(),
-        stdout: out.join().expect("stdout reader"),
-        stderr: err.join().expect("stderr reader"),
+        stdout: done.stdout,
+        stderr: done.stderr,
     }
 }
 

@@ -1,8 +1,9 @@
-//! Helpers shared by the CLI tests.
+//! Helpers shared by the workspace's integration tests.
 
 use std::process::Command;
 
 /// Runs the `mpcc` binary of this build from the repository root: exit code, stdout, stderr.
+#[allow(dead_code)] // not every test binary that includes this module runs mpcc
 pub fn mpcc(args: &[&str]) -> (Option<i32>, String, String) {
     let out = Command::new(env!("CARGO_BIN_EXE_mpcc"))
         .args(args)
@@ -14,4 +15,56 @@ pub fn mpcc(args: &[&str]) -> (Option<i32>, String, String) {
         String::from_utf8_lossy(&out.stdout).into_owned(),
         String::from_utf8_lossy(&out.stderr).into_owned(),
     )
+}
+
+/// What a child printed and how it ended, or `None` for `status` if it was killed after the
+/// timeout.
+#[allow(dead_code)] // not every test binary that includes this module waits for children
+pub struct Finished {
+    /// The exit status (`None`: timed out and killed).
+    pub status: Option<std::process::ExitStatus>,
+    /// Standard output (what was printed until the end or the kill).
+    pub stdout: String,
+    /// Standard error.
+    pub stderr: String,
+}
+
+/// Waits for `child` (spawned with piped stdout and stderr, read on threads so a full pipe
+/// cannot stall it) at most `timeout`, killing it then.
+#[allow(dead_code)]
+pub fn wait_with_timeout(
+    child: &mut std::process::Child,
+    timeout: std::time::Duration,
+) -> Finished {
+    use std::io::Read;
+    fn drain(r: Option<impl Read + Send + 'static>) -> std::thread::JoinHandle<String> {
+        std::thread::spawn(move || {
+            let mut s = String::new();
+            if let Some(mut r) = r {
+                let _ = r.read_to_string(&mut s);
+            }
+            s
+        })
+    }
+    let out = drain(child.stdout.take());
+    let err = drain(child.stderr.take());
+    let start = std::time::Instant::now();
+    let status = loop {
+        match child.try_wait() {
+            Ok(Some(status)) => break Some(status),
+            Ok(None) if start.elapsed() <= timeout => {
+                std::thread::sleep(std::time::Duration::from_millis(20));
+            }
+            _ => {
+                let _ = child.kill();
+                let _ = child.wait();
+                break None;
+            }
+        }
+    };
+    Finished {
+        status,
+        stdout: out.join().unwrap_or_default(),
+        stderr: err.join().unwrap_or_default(),
+    }
 }

@@ -7,13 +7,14 @@
 //! qemu-system-arm`) and the target (`rustup target add thumbv7em-none-eabihf`): without
 //! them the test fails, it never skips.
 
-use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use quadrotor_rates_f32::{DT, NX_MODEL, Real, RtiStatus, Solver};
 
+#[path = "../common/mod.rs"]
+mod common;
 #[path = "src/plant.rs"]
 mod plant;
 use plant::plant;
@@ -86,32 +87,11 @@ fn run_qemu(elf: &Path, machine: &str, cpu: &str) -> String {
                  qemu-system-arm`); .ci/run installs it"
             )
         });
-    let mut stdout = child.stdout.take().expect("piped stdout");
-    let reader = std::thread::spawn(move || {
-        let mut s = String::new();
-        let _ = stdout.read_to_string(&mut s);
-        s
-    });
-    let start = Instant::now();
-    let status = loop {
-        if let Some(status) = child.try_wait().expect("wait for qemu") {
-            break status;
-        }
-        if start.elapsed() > QEMU_TIMEOUT {
-            let _ = child.kill();
-            let _ = child.wait();
-            panic!(
-                "{QEMU} -M {machine} timed out after {QEMU_TIMEOUT:?}; output so far:\n{}",
-                reader.join().unwrap_or_default()
-            );
-        }
-        std::thread::sleep(Duration::from_millis(20));
+    let done = common::wait_with_timeout(&mut child, QEMU_TIMEOUT);
+    let (out, err) = (done.stdout, done.stderr);
+    let Some(status) = done.status else {
+        panic!("{QEMU} -M {machine} timed out after {QEMU_TIMEOUT:?}; output so far:\n{out}");
     };
-    let out = reader.join().expect("reader thread");
-    let mut err = String::new();
-    if let Some(mut e) = child.stderr.take() {
-        let _ = e.read_to_string(&mut err);
-    }
     assert!(
         status.success(),
         "{QEMU} -M {machine} exited with {status}:\n{out}\n{err}"
