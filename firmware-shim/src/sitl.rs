@@ -1,7 +1,7 @@
 //! The simulated PX4's commander: PX4's offboard rules as a state machine clocked by the
-//! caller, for `mpcc sitl` (the vehicle physics and the UDP endpoint around it are the next
-//! step). It decides what PX4 would: which mode it is in, whether it is armed, which
-//! commands it accepts (and acknowledges, twice for a mode change as PX4 v1.16 did), and when
+//! caller, for `mpcc sitl` (the vehicle around it, physics and streams, is
+//! [`crate::vehicle`]). It decides what PX4 would: which mode it is in, whether it is armed,
+//! which commands it accepts (and acknowledges, twice for a mode change as PX4 v1.16 did), and when
 //! it leaves OFFBOARD because the setpoint stream stopped.
 //!
 //! Rules (PX4 v1.16 as observed, `shared/anchors/PX4_OFFBOARD.md`, and PX4's commander):
@@ -17,7 +17,17 @@
 //!   (POSCTL, COM_OBL_RC_ACT = 0) with the failsafe flagged.
 //! * AUTO.LAND and AUTO.RTL disarm on their own after touchdown.
 //! * The mode shows in the 1 Hz HEARTBEAT (`custom_mode`), so a client sees it late.
+//! * MAV_CMD_SET_MESSAGE_INTERVAL (511) sets the rate of the messages the simulated vehicle
+//!   streams ([`STREAMED_MESSAGES`]) as PX4's mavlink module does (`set_message_interval`):
+//!   param1 the message id (rounded), param2 the interval [us] (negative: stop, 0: the
+//!   default rate, positive: that interval); the vehicle reads the result with
+//!   [`Commander::message_interval`]. PX4 answers MAV_RESULT_FAILED for HEARTBEAT, for a
+//!   message it cannot stream, and for a non-zero param3, param4 or param7 (unsupported
+//!   options); so does this commander, for any message outside [`STREAMED_MESSAGES`]
+//!   (PX4 itself knows many more streams, e.g. ATTITUDE or HIGHRES_IMU, which this
+//!   simulation does not produce). A single ACK, as PX4 sends for this command.
 
+use mavlink::MessageData;
 use mavlink::dialects::common::{
     self as mc, MavAutopilot, MavCmd, MavMessage, MavModeFlag, MavResult, MavState, MavType,
 };
@@ -41,6 +51,28 @@ impl Default for CommanderConfig {
             heartbeat_period: 1.0,
         }
     }
+}
+
+/// The messages whose rate MAV_CMD_SET_MESSAGE_INTERVAL sets on the simulated vehicle:
+/// ATTITUDE_QUATERNION (31), LOCAL_POSITION_NED (32), EXTENDED_SYS_STATE (245) and
+/// ODOMETRY (331).
+pub const STREAMED_MESSAGES: [u32; 4] = [
+    mc::ATTITUDE_QUATERNION_DATA::ID,
+    mc::LOCAL_POSITION_NED_DATA::ID,
+    mc::EXTENDED_SYS_STATE_DATA::ID,
+    mc::ODOMETRY_DATA::ID,
+];
+
+/// The rate of a streamed message as the companion last set it with
+/// MAV_CMD_SET_MESSAGE_INTERVAL.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum MessageInterval {
+    /// The vehicle's default rate (never set, or set with interval 0).
+    Default,
+    /// Not streamed (a negative interval; -1 in the MAVLink spec).
+    Stopped,
+    /// One message every this many seconds (> 0).
+    Every(f64),
 }
 
 /// A rate + thrust setpoint as PX4 received it (FRD rates, normalized thrust).
@@ -82,6 +114,7 @@ pub struct Commander {
     last_heartbeat: Option<f64>,
     failsafe_at: Option<f64>,
     status: VehicleStatus,
+    intervals: [MessageInterval; STREAMED_MESSAGES.len()],
 }
 
 impl Commander {
@@ -98,7 +131,48 @@ impl Commander {
                 pose_valid: true,
                 landed: true,
             },
+            intervals: [MessageInterval::Default; STREAMED_MESSAGES.len()],
         }
+    }
+
+    /// The rate of `message_id` as last set with MAV_CMD_SET_MESSAGE_INTERVAL
+    /// ([`MessageInterval::Default`] if never set; `None` for a message outside
+    /// [`STREAMED_MESSAGES`]).
+    pub fn message_interval(&self, message_id: u32) -> Option<MessageInterval> {
+        STREAMED_MESSAGES
+            .iter()
+            .position(|&id| id == message_id)
+            .and_then(|i| self.intervals.get(i).copied())
+    }
+
+    /// MAV_CMD_SET_MESSAGE_INTERVAL as PX4's `MavlinkReceiver::set_message_interval`.
+    fn set_message_interval(&mut self, c: &mc::COMMAND_LONG_DATA) -> MavResult {
+        // PX4: (int)(param + 0.5f); an `as` cast truncates towards zero like C's (and maps
+        // NaN to 0).
+        let round = |p: f32| (p + 0.5) as i32;
+        let unsupported = |p: f32| p.is_finite() && round(p) != 0;
+        if unsupported(c.param3) || unsupported(c.param4) || unsupported(c.param7) {
+            return MavResult::MAV_RESULT_FAILED;
+        }
+        let id = round(c.param1);
+        let Some(slot) = u32::try_from(id)
+            .ok()
+            .and_then(|id| STREAMED_MESSAGES.iter().position(|&s| s == id))
+            .and_then(|i| self.intervals.get_mut(i))
+        else {
+            // HEARTBEAT (0) and anything this vehicle does not stream.
+            return MavResult::MAV_RESULT_FAILED;
+        };
+        let interval = c.param2;
+        *slot = if interval < -0.00001 {
+            MessageInterval::Stopped
+        } else if interval > 0.00001 {
+            MessageInterval::Every(f64::from(interval) * 1e-6)
+        } else {
+            // 0 (and NaN, as in PX4, whose comparisons fail the same way): the default.
+            MessageInterval::Default
+        };
+        MavResult::MAV_RESULT_ACCEPTED
     }
 
     /// The current mode.
@@ -189,7 +263,7 @@ impl Commander {
                     reply(MavResult::MAV_RESULT_DENIED)
                 }
             }
-            MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL => reply(MavResult::MAV_RESULT_ACCEPTED),
+            MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL => reply(self.set_message_interval(c)),
             _ => reply(MavResult::MAV_RESULT_UNSUPPORTED),
         }
     }

@@ -1,29 +1,47 @@
 //! The simulated PX4 vehicle: the [`crate::sitl::Commander`] around the simulator's plant
-//! and PX4-like rate loop (`mpc-sim`), speaking MAVLink messages in PX4's frames. The UDP
-//! endpoint (`mpcc sitl`) is the next step; this is its vehicle, stepped by the caller.
+//! and PX4-like rate loop (`mpc-sim`), speaking MAVLink messages in PX4's frames; `mpcc sitl`
+//! serves it on a link with [`serve`].
 //!
 //! * OFFBOARD: the last SET_ATTITUDE_TARGET flies it: FRD rates -> FLU, normalized thrust ->
 //!   collective acceleration with the [`ThrustMap`] (the vehicle's hover thrust), through the
 //!   1 kHz rate loop.
 //! * POSCTL (hold), AUTO.LAND, AUTO.RTL: a PX4-like position controller (PD on position and
-//!   velocity, thrust vector -> attitude -> body rates) holds the point where the mode began,
-//!   descends at [`VehicleConfig::land_speed`], or flies home at the current height and lands.
-//! * Out: PX4's HEARTBEAT (1 Hz), ODOMETRY (LOCAL_NED / LOCAL_NED, every
-//!   [`VehicleConfig::odometry_period`]), EXTENDED_SYS_STATE (1 Hz), and the commander's
-//!   COMMAND_ACKs.
+//!   velocity, tilt limited as MPC_TILTMAX_AIR) gives a thrust vector; the attitude it needs
+//!   (the heading held from the moment the mode began) goes through PX4's quaternion attitude
+//!   controller ([`attitude_control`], mc_att_control's `AttitudeControl` with PX4's default
+//!   gains and rate limits, [`AttitudeGains`]) to body rates for the same rate loop. It holds
+//!   the point where the mode began, descends at [`VehicleConfig::land_speed`], or flies
+//!   home at the current height (at least 2 m above home) and lands there. The attitude law
+//!   has no singularity: it recovers from any attitude, inverted included, turning the short
+//!   way at PX4's maximum rates.
+//! * Thrust in those modes: the thrust vector's component along the current body z axis,
+//!   never negative. PX4 itself commands the full magnitude whatever the attitude; while the
+//!   vehicle is inverted (a flip interrupted by RTL) that would push it towards the ground,
+//!   so this vehicle idles the collective until the thrust axis points up again (the mixer
+//!   keeps the torque, as PX4's airmode).
+//! * Out: PX4's HEARTBEAT (1 Hz) and what PX4 streams on its onboard link, at PX4's default
+//!   rates unless the companion changes them with MAV_CMD_SET_MESSAGE_INTERVAL
+//!   ([`crate::sitl`]): ODOMETRY (30 Hz, LOCAL_NED / LOCAL_NED), LOCAL_POSITION_NED (30 Hz),
+//!   ATTITUDE_QUATERNION (50 Hz, NED -> FRD, FRD rates), EXTENDED_SYS_STATE (1 Hz), and the
+//!   commander's COMMAND_ACKs. The defaults are [`VehicleConfig`] fields.
+//! * [`SimVehicle::record`]: the true flight (crash, heights, touchdowns, mode changes,
+//!   arming, the pitch rotation flown in OFFBOARD), kept at every 1 ms step, for the
+//!   summary of `mpcc sitl`.
 
+use mavlink::MessageData;
 use mavlink::dialects::common::{self as mc, MavFrame, MavLandedState, MavMessage, MavVtolState};
-use mpc_sim::controller::attitude_rates;
 use mpc_sim::estimator::{Estimate, Estimator, EstimatorConfig};
 use mpc_sim::mission::attitude_from_thrust;
 use mpc_sim::plant::{Contact, Disturbance, Plant, QuadParams, QuadState};
 use mpc_sim::rate_loop::{RateController, RateGains};
-use nalgebra::Vector3;
+use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 
 use crate::frames::{enu_to_ned, flu_to_frd, frd_to_flu, quat_enu_flu_to_ned_frd, quat_to_mavlink};
 use crate::messages::Px4Mode;
 use crate::setpoint::ThrustMap;
-use crate::sitl::{Commander, CommanderConfig, Control, VehicleStatus};
+use crate::sitl::{
+    Commander, CommanderConfig, Control, MessageInterval, STREAMED_MESSAGES, VehicleStatus,
+};
 
 /// Settings of the simulated vehicle.
 #[derive(Clone, Debug, PartialEq)]
@@ -38,15 +56,26 @@ pub struct VehicleConfig {
     pub seed: u64,
     /// Where it starts, on the ground (ENU) [m]; also home for AUTO.RTL.
     pub home: Vector3<f64>,
-    /// ODOMETRY period [s] (PX4 streams it at up to ~100 Hz when asked).
+    /// Default ODOMETRY period [s]: PX4 streams it at 30 Hz on the onboard link until asked
+    /// otherwise (up to ~100 Hz seen). Not positive or not finite: not streamed by default.
     pub odometry_period: f64,
+    /// Default LOCAL_POSITION_NED period [s] (PX4: 30 Hz); not positive or not finite: off.
+    pub local_position_period: f64,
+    /// Default ATTITUDE_QUATERNION period [s] (PX4: 50 Hz); not positive or not finite: off.
+    pub attitude_quaternion_period: f64,
+    /// Default EXTENDED_SYS_STATE period [s] (1 Hz); not positive or not finite: off.
+    pub sys_state_period: f64,
     /// AUTO.LAND descent speed [m/s].
     pub land_speed: f64,
+    /// The attitude controller of PX4's own modes.
+    pub attitude: AttitudeGains,
 }
 
 impl Default for VehicleConfig {
-    /// The simulator's default quadrotor at the origin, motion-capture-like noise, odometry
-    /// at 100 Hz, landing at 0.5 m/s.
+    /// The simulator's default quadrotor at the origin, motion-capture-like noise, PX4's
+    /// default rates on the onboard link (ODOMETRY and LOCAL_POSITION_NED 30 Hz,
+    /// ATTITUDE_QUATERNION 50 Hz, EXTENDED_SYS_STATE 1 Hz), landing at 0.5 m/s, PX4's
+    /// default attitude gains.
     fn default() -> Self {
         Self {
             commander: CommanderConfig::default(),
@@ -54,10 +83,338 @@ impl Default for VehicleConfig {
             estimator: EstimatorConfig::noisy(),
             seed: 0,
             home: Vector3::zeros(),
-            odometry_period: 0.01,
+            odometry_period: 1.0 / 30.0,
+            local_position_period: 1.0 / 30.0,
+            attitude_quaternion_period: 1.0 / 50.0,
+            sys_state_period: 1.0,
             land_speed: 0.5,
+            attitude: AttitudeGains::default(),
         }
     }
+}
+
+/// PX4's multicopter attitude controller parameters (mc_att_control).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AttitudeGains {
+    /// P gains roll, pitch, yaw [1/s] (MC_ROLL_P, MC_PITCH_P, MC_YAW_P).
+    pub p: Vector3<f64>,
+    /// Yaw weight in [0, 1] (MC_YAW_WEIGHT): how much of the yaw error is corrected
+    /// together with the tilt (PX4 de-prioritizes yaw).
+    pub yaw_weight: f64,
+    /// Rate limits roll, pitch, yaw [rad/s] (MC_ROLLRATE_MAX, MC_PITCHRATE_MAX,
+    /// MC_YAWRATE_MAX).
+    pub max_rates: Vector3<f64>,
+}
+
+impl Default for AttitudeGains {
+    /// PX4's defaults: P (6.5, 6.5, 2.8), yaw weight 0.4, rate limits 220, 220, 200 deg/s.
+    fn default() -> Self {
+        Self {
+            p: Vector3::new(6.5, 6.5, 2.8),
+            yaw_weight: 0.4,
+            max_rates: Vector3::new(220.0, 220.0, 200.0).map(f64::to_radians),
+        }
+    }
+}
+
+/// PX4's `Quaternion(src, dst)`: the shortest rotation taking `src` to `dst`, with PX4's
+/// choice of axis when they are opposite.
+fn rotation_between(src: &Vector3<f64>, dst: &Vector3<f64>) -> Quaternion<f64> {
+    let cr = src.cross(dst);
+    let dt = src.dot(dst);
+    let (w, axis) = if cr.norm() < 1e-5 && dt < 0.0 {
+        let a = src.abs();
+        let pick = if a.x < a.y {
+            if a.x < a.z {
+                Vector3::x()
+            } else {
+                Vector3::z()
+            }
+        } else if a.y < a.z {
+            Vector3::y()
+        } else {
+            Vector3::z()
+        };
+        (0.0, src.cross(&pick))
+    } else {
+        (dt + (src.norm_squared() * dst.norm_squared()).sqrt(), cr)
+    };
+    let q = Quaternion::new(w, axis.x, axis.y, axis.z);
+    let n = q.norm();
+    if n > 0.0 && n.is_finite() {
+        q / n
+    } else {
+        Quaternion::identity()
+    }
+}
+
+/// PX4's `canonical()`: the sign that makes the first non-negligible component positive.
+fn canonical(q: Quaternion<f64>) -> Quaternion<f64> {
+    let eps = f64::from(f32::EPSILON);
+    for c in [q.w, q.i, q.j, q.k] {
+        if c.abs() > eps {
+            return if c < 0.0 { -q } else { q };
+        }
+    }
+    q
+}
+
+/// PX4's attitude controller (mc_att_control `AttitudeControl::update`), in PX4's frames:
+/// body rates FRD [rad/s] that turn attitude `q` towards `qd` (both FRD body to NED world).
+///
+/// The tilt is corrected first: `qd_red` is the shortest rotation of the thrust axis onto
+/// the desired one, and only `yaw_weight` of the remaining yaw error is mixed in (the yaw
+/// gain is divided by the weight to compensate, as PX4 does). Then `qe = q^-1 * qd`, in its
+/// canonical sign (`qe.w >= 0`: the short way round), `rate = 2 * imag(qe) * P`
+/// elementwise, clamped to the rate limits. Inverted (the thrust axes opposite), the full
+/// attitude error is used, as in PX4; the result is finite for any unit quaternions.
+pub fn attitude_control(
+    q: &UnitQuaternion<f64>,
+    qd: &UnitQuaternion<f64>,
+    gains: &AttitudeGains,
+) -> Vector3<f64> {
+    let yaw_w = gains.yaw_weight.clamp(0.0, 1.0);
+    let mut p = gains.p;
+    if yaw_w > 1e-4 {
+        p.z /= yaw_w;
+    }
+    let (qv, qdv) = (q.into_inner(), qd.into_inner());
+    let e_z = q * Vector3::z();
+    let e_z_d = qd * Vector3::z();
+    let tilt = rotation_between(&e_z, &e_z_d);
+    let qd_red = if tilt.i.abs() > 1.0 - 1e-5 || tilt.j.abs() > 1.0 - 1e-5 {
+        qdv
+    } else {
+        tilt * qv
+    };
+    let mut dyaw = canonical(qd_red.conjugate() * qdv);
+    dyaw.w = dyaw.w.clamp(-1.0, 1.0);
+    dyaw.k = dyaw.k.clamp(-1.0, 1.0);
+    let yaw_part = Quaternion::new(
+        (yaw_w * dyaw.w.acos()).cos(),
+        0.0,
+        0.0,
+        (yaw_w * dyaw.k.asin()).sin(),
+    );
+    let qd_mix = qd_red * yaw_part;
+    let qe = canonical(qv.conjugate() * qd_mix);
+    let eq = qe.imag() * 2.0;
+    let rate = eq.component_mul(&p);
+    let lim = gains.max_rates.abs();
+    let rate = rate.zip_map(&lim, |r, l| r.clamp(-l, l));
+    if rate.iter().all(|r| r.is_finite()) {
+        rate
+    } else {
+        Vector3::zeros()
+    }
+}
+
+/// The heading (ENU yaw, rad) attitude `q` would have after the shortest rotation of its
+/// thrust axis to vertical: the current heading when upright, and the heading it will come
+/// out with when it recovers from a tilted or inverted attitude (the nose of a vehicle
+/// pitched over backwards points the way it did before the flip).
+fn tilt_free_heading(q: &UnitQuaternion<f64>) -> f64 {
+    let level = rotation_between(&(q * Vector3::z()), &Vector3::z()) * q.into_inner();
+    let x = UnitQuaternion::new_normalize(level) * Vector3::x();
+    x.y.atan2(x.x)
+}
+
+/// A Px4Mode as PX4's ground station names it ("OFFBOARD", "AUTO.RTL", ...).
+pub fn mode_name(mode: Px4Mode) -> String {
+    match mode {
+        Px4Mode::Offboard => "OFFBOARD".to_string(),
+        Px4Mode::Land => "AUTO.LAND".to_string(),
+        Px4Mode::Return => "AUTO.RTL".to_string(),
+        Px4Mode::Position => "POSCTL".to_string(),
+        Px4Mode::Other(m, s) => format!("mode {m}.{s}"),
+    }
+}
+
+/// A touchdown of the true vehicle.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TouchdownRecord {
+    /// Simulated time [s].
+    pub time: f64,
+    /// Downward speed at impact [m/s].
+    pub vertical_speed: f64,
+    /// Horizontal speed at impact [m/s].
+    pub horizontal_speed: f64,
+    /// Tilt at impact [rad].
+    pub tilt: f64,
+    /// Where (ENU) [m].
+    pub position: Vector3<f64>,
+}
+
+/// A mode change of the simulated PX4.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ModeChange {
+    /// Simulated time [s].
+    pub time: f64,
+    /// The mode before.
+    pub from: Px4Mode,
+    /// The mode after.
+    pub to: Px4Mode,
+    /// Whether PX4 changed it on its own for the offboard-loss failsafe (otherwise it was
+    /// commanded).
+    pub failsafe: bool,
+}
+
+/// The true flight of a [`SimVehicle`], kept up to date at every 1 ms step.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FlightRecord {
+    /// Why the plant crashed, if it did (the plant is frozen from then on).
+    pub crashed: Option<String>,
+    /// When it crashed [s].
+    pub crash_time: Option<f64>,
+    /// Time spent airborne [s].
+    pub airborne_time: f64,
+    /// When it first left the ground [s].
+    pub first_liftoff: Option<f64>,
+    /// Highest true height (ENU z, the ground is z = 0) while airborne [m].
+    pub max_height: Option<f64>,
+    /// Lowest true height while airborne after the first lift-off [m] (close to 0 after a
+    /// landing: it includes the final approach).
+    pub min_height: Option<f64>,
+    /// Integral of the true body rate about body y while in OFFBOARD [rad], in the models'
+    /// FLU body frame: positive tips the nose down, so a back flip (nose up, positive FRD
+    /// pitch rate) counts negative.
+    pub offboard_pitch_rotation: f64,
+    /// Largest true |pitch rate| while in OFFBOARD [rad/s].
+    pub offboard_max_pitch_rate: f64,
+    /// The touchdowns, in order.
+    pub touchdowns: Vec<TouchdownRecord>,
+    /// The mode changes, in order (the vehicle starts in POSCTL).
+    pub mode_changes: Vec<ModeChange>,
+    /// When it was armed [s].
+    pub armed_at: Vec<f64>,
+    /// When it was disarmed [s] (by command or by PX4 after an AUTO landing).
+    pub disarmed_at: Vec<f64>,
+    /// The true position now (ENU) [m].
+    pub final_position: Vector3<f64>,
+    /// Simulated time now [s].
+    pub time: f64,
+}
+
+impl FlightRecord {
+    fn new(home: Vector3<f64>) -> Self {
+        Self {
+            crashed: None,
+            crash_time: None,
+            airborne_time: 0.0,
+            first_liftoff: None,
+            max_height: None,
+            min_height: None,
+            offboard_pitch_rotation: 0.0,
+            offboard_max_pitch_rate: 0.0,
+            touchdowns: Vec::new(),
+            mode_changes: Vec::new(),
+            armed_at: Vec::new(),
+            disarmed_at: Vec::new(),
+            final_position: home,
+            time: 0.0,
+        }
+    }
+
+    /// A human summary, one fact a line.
+    pub fn summary_lines(&self) -> Vec<String> {
+        let mut out = Vec::new();
+        out.push(match &self.crashed {
+            Some(why) => format!(
+                "CRASHED at {:.3} s: {why}",
+                self.crash_time.unwrap_or(f64::NAN)
+            ),
+            None => "no crash".to_string(),
+        });
+        out.push(match self.first_liftoff {
+            Some(t) => format!(
+                "airborne {:.2} s of {:.2} s (first lift-off at {t:.3} s)",
+                self.airborne_time, self.time
+            ),
+            None => format!("never left the ground ({:.2} s)", self.time),
+        });
+        if let (Some(hi), Some(lo)) = (self.max_height, self.min_height) {
+            out.push(format!(
+                "height while airborne: max {hi:.2} m, min {lo:.2} m"
+            ));
+        }
+        let rot = self.offboard_pitch_rotation;
+        out.push(format!(
+            "pitch rotation in OFFBOARD: {rot:.2} rad ({:.0} deg, {:.2} turns; FLU, nose-down \
+             positive), max |pitch rate| {:.2} rad/s",
+            rot.to_degrees(),
+            rot / std::f64::consts::TAU,
+            self.offboard_max_pitch_rate
+        ));
+        let times = |v: &[f64]| {
+            v.iter()
+                .map(|t| format!("{t:.3} s"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        if !self.armed_at.is_empty() {
+            out.push(format!("armed at {}", times(&self.armed_at)));
+        }
+        if !self.disarmed_at.is_empty() {
+            out.push(format!("disarmed at {}", times(&self.disarmed_at)));
+        }
+        for m in &self.mode_changes {
+            out.push(format!(
+                "mode at {:.3} s: {} -> {}{}",
+                m.time,
+                mode_name(m.from),
+                mode_name(m.to),
+                if m.failsafe {
+                    " (offboard-loss failsafe)"
+                } else {
+                    ""
+                }
+            ));
+        }
+        for t in &self.touchdowns {
+            out.push(format!(
+                "touchdown at {:.3} s: {:.2} m/s down, {:.2} m/s across, tilt {:.1} deg, at \
+                 ({:.2}, {:.2}) m",
+                t.time,
+                t.vertical_speed,
+                t.horizontal_speed,
+                t.tilt.to_degrees(),
+                t.position.x,
+                t.position.y
+            ));
+        }
+        let p = self.final_position;
+        out.push(format!(
+            "final position (ENU): ({:.2}, {:.2}, {:.2}) m",
+            p.x, p.y, p.z
+        ));
+        out
+    }
+}
+
+/// What PX4's own mode is flying towards: set when the mode begins.
+#[derive(Clone, Copy, Debug)]
+struct Px4Target {
+    mode: Px4Mode,
+    /// Hold point, or home (at the return height) for AUTO.RTL.
+    point: Vector3<f64>,
+    /// Heading to hold (ENU yaw) [rad].
+    yaw: f64,
+    /// Descending (AUTO.LAND; AUTO.RTL once over home).
+    descending: bool,
+}
+
+/// A streamed message and its schedule.
+#[derive(Clone, Copy, Debug)]
+struct Stream {
+    id: u32,
+    default: Option<f64>,
+    period: Option<f64>,
+    next: f64,
+    last: Option<f64>,
+}
+
+fn positive(period: f64) -> Option<f64> {
+    (period.is_finite() && period > 0.0).then_some(period)
 }
 
 /// The simulated PX4 vehicle.
@@ -70,9 +427,9 @@ pub struct SimVehicle {
     map: ThrustMap,
     t: f64,
     landed: bool,
-    hold: Option<(Px4Mode, Vector3<f64>)>,
-    last_odometry: Option<f64>,
-    last_sys_state: Option<f64>,
+    target: Option<Px4Target>,
+    streams: Vec<Stream>,
+    record: FlightRecord,
 }
 
 const STEP: f64 = 0.001;
@@ -84,8 +441,27 @@ impl SimVehicle {
         // The hover thrust of this vehicle as PX4 would have calibrated it: hover over the
         // maximum collective thrust (linear thrust model, as PX4's).
         let hover_thrust = p.mass * p.g / (4.0 * p.rotor_thrust_max());
+        let default_period = |id: u32| match id {
+            mc::ODOMETRY_DATA::ID => positive(cfg.odometry_period),
+            mc::LOCAL_POSITION_NED_DATA::ID => positive(cfg.local_position_period),
+            mc::ATTITUDE_QUATERNION_DATA::ID => positive(cfg.attitude_quaternion_period),
+            mc::EXTENDED_SYS_STATE_DATA::ID => positive(cfg.sys_state_period),
+            _ => None,
+        };
+        let streams = STREAMED_MESSAGES
+            .iter()
+            .map(|&id| Stream {
+                id,
+                default: default_period(id),
+                period: default_period(id),
+                next: 0.0,
+                last: None,
+            })
+            .collect();
+        let plant = Plant::new(p.clone(), QuadState::at_rest(cfg.home));
+        let landed = plant.contact() == Contact::OnGround;
         Self {
-            plant: Plant::new(p.clone(), QuadState::at_rest(cfg.home)),
+            plant,
             rate: RateController::new(p, RateGains::default()),
             est: Estimator::new(cfg.estimator.clone(), cfg.seed),
             commander: Commander::new(cfg.commander),
@@ -94,10 +470,10 @@ impl SimVehicle {
                 g: p.g,
             },
             t: 0.0,
-            landed: true,
-            hold: None,
-            last_odometry: None,
-            last_sys_state: None,
+            landed,
+            target: None,
+            streams,
+            record: FlightRecord::new(cfg.home),
             cfg,
         }
     }
@@ -127,18 +503,68 @@ impl SimVehicle {
         self.plant.crashed().is_some()
     }
 
-    /// A message from the companion; returns PX4's answers.
-    pub fn handle(&mut self, msg: &MavMessage) -> Vec<MavMessage> {
-        self.commander.on_message(msg, self.t)
+    /// The record of the true flight so far.
+    pub fn record(&self) -> &FlightRecord {
+        &self.record
     }
 
-    /// PX4's position controller: body rates and collective acceleration towards `p_ref`
-    /// with velocity `v_ref`.
+    /// Records the commander's mode and arming changes since (`mode`, `armed`).
+    fn note_commander(&mut self, mode: Px4Mode, armed: bool, failsafe: bool) {
+        let (now_mode, now_armed) = (self.commander.mode(), self.commander.armed());
+        if now_mode != mode {
+            self.record.mode_changes.push(ModeChange {
+                time: self.t,
+                from: mode,
+                to: now_mode,
+                failsafe: failsafe && mode == Px4Mode::Offboard && now_mode == Px4Mode::Position,
+            });
+        }
+        if now_armed != armed {
+            if now_armed {
+                self.record.armed_at.push(self.t);
+            } else {
+                self.record.disarmed_at.push(self.t);
+            }
+        }
+    }
+
+    /// A message from the companion; returns PX4's answers.
+    pub fn handle(&mut self, msg: &MavMessage) -> Vec<MavMessage> {
+        if let MavMessage::PARAM_REQUEST_READ(r) = msg {
+            return self.param_value(r);
+        }
+        let (mode, armed) = (self.commander.mode(), self.commander.armed());
+        let out = self.commander.on_message(msg, self.t);
+        self.note_commander(mode, armed, false);
+        out
+    }
+
+    /// PARAM_VALUE for a PARAM_REQUEST_READ: this vehicle has one parameter,
+    /// `MPC_THR_HOVER` (its hover thrust, index 0); PX4 does not answer a request for a
+    /// parameter it does not have, nor does this.
+    fn param_value(&self, r: &mc::PARAM_REQUEST_READ_DATA) -> Vec<MavMessage> {
+        let by_name =
+            crate::messages::param_name_is(&r.param_id.into(), crate::messages::HOVER_THRUST_PARAM);
+        if !(by_name || r.param_index == 0) {
+            return Vec::new();
+        }
+        vec![MavMessage::PARAM_VALUE(mc::PARAM_VALUE_DATA {
+            param_value: self.map.hover_thrust as f32,
+            param_count: 1,
+            param_index: 0,
+            param_id: crate::messages::HOVER_THRUST_PARAM.into(),
+            param_type: mc::MavParamType::MAV_PARAM_TYPE_REAL32,
+        })]
+    }
+
+    /// PX4's position and attitude control: body rates (FLU) and collective acceleration
+    /// towards `p_ref` with velocity `v_ref`, heading `yaw`.
     fn position_control(
         &self,
         e: &Estimate,
         p_ref: &Vector3<f64>,
         v_ref: &Vector3<f64>,
+        yaw: f64,
     ) -> (Vector3<f64>, f64) {
         let (kp, kd) = (Vector3::new(2.0, 2.0, 4.0), Vector3::new(3.0, 3.0, 4.0));
         let mut a = kp.component_mul(&(p_ref - e.p)) + kd.component_mul(&(v_ref - e.v));
@@ -150,11 +576,43 @@ impl SimVehicle {
             a.y *= lim / h;
         }
         let f = a + Vector3::z() * self.cfg.params.g;
-        let (_, _, yaw) = e.q.euler_angles();
         let qd = attitude_from_thrust(&f, yaw);
-        let rates = attitude_rates(&e.q, &qd, 0.15);
+        let rates_frd = attitude_control(
+            &quat_enu_flu_to_ned_frd(&e.q),
+            &quat_enu_flu_to_ned_frd(&qd),
+            &self.cfg.attitude,
+        );
         let bz = e.q * Vector3::z();
-        (rates, f.dot(&bz).max(0.0))
+        (frd_to_flu(&rates_frd), f.dot(&bz).max(0.0))
+    }
+
+    /// The target of PX4's own `mode`, kept while the mode lasts.
+    fn px4_target(&mut self, mode: Px4Mode, e: &Estimate) -> Px4Target {
+        let mut target = match self.target {
+            Some(t) if t.mode == mode => t,
+            _ => {
+                let point = match mode {
+                    Px4Mode::Return => Vector3::new(
+                        self.cfg.home.x,
+                        self.cfg.home.y,
+                        e.p.z.max(self.cfg.home.z + 2.0),
+                    ),
+                    _ => e.p,
+                };
+                Px4Target {
+                    mode,
+                    point,
+                    yaw: tilt_free_heading(&e.q),
+                    descending: mode == Px4Mode::Land,
+                }
+            }
+        };
+        // AUTO.RTL: over home, land (and keep landing).
+        if mode == Px4Mode::Return && (e.p.xy() - target.point.xy()).norm() < 0.3 {
+            target.descending = true;
+        }
+        self.target = Some(target);
+        target
     }
 
     /// Advances by `duration` seconds (1 kHz steps); returns PX4's messages of that time.
@@ -168,15 +626,18 @@ impl SimVehicle {
                 pose_valid: e.pose_valid,
                 landed: self.landed,
             };
+            let (mode, armed) = (self.commander.mode(), self.commander.armed());
             let (control, msgs) = self.commander.tick(self.t, status);
+            self.note_commander(mode, armed, true);
             out.extend(msgs);
+            let offboard = matches!(control, Control::Offboard(_));
             let (rates, c) = match control {
                 Control::Disarmed => {
-                    self.hold = None;
+                    self.target = None;
                     (None, 0.0)
                 }
                 Control::Offboard(sp) => {
-                    self.hold = None;
+                    self.target = None;
                     let r = sp.rates_frd.map(f64::from);
                     (
                         Some(frd_to_flu(&Vector3::new(r[0], r[1], r[2]))),
@@ -184,36 +645,17 @@ impl SimVehicle {
                     )
                 }
                 Control::Px4(mode) => {
-                    let hold = match self.hold {
-                        Some((m, p)) if m == mode => p,
-                        _ => {
-                            let p = match mode {
-                                Px4Mode::Return => Vector3::new(
-                                    self.cfg.home.x,
-                                    self.cfg.home.y,
-                                    e.p.z.max(self.cfg.home.z + 2.0),
-                                ),
-                                _ => e.p,
-                            };
-                            self.hold = Some((mode, p));
-                            p
-                        }
-                    };
-                    let descend = match mode {
-                        Px4Mode::Land => true,
-                        Px4Mode::Return => (e.p.xy() - hold.xy()).norm() < 0.3,
-                        _ => false,
-                    };
-                    let (p_ref, v_ref) = if descend {
+                    let target = self.px4_target(mode, &e);
+                    let (p_ref, v_ref) = if target.descending {
                         let v = Vector3::new(0.0, 0.0, -self.cfg.land_speed);
-                        (Vector3::new(hold.x, hold.y, e.p.z), v)
+                        (Vector3::new(target.point.x, target.point.y, e.p.z), v)
                     } else {
-                        (hold, Vector3::zeros())
+                        (target.point, Vector3::zeros())
                     };
-                    if self.landed && descend {
+                    if self.landed && target.descending {
                         (None, 0.0)
                     } else {
-                        let (r, c) = self.position_control(&e, &p_ref, &v_ref);
+                        let (r, c) = self.position_control(&e, &p_ref, &v_ref, target.yaw);
                         (Some(r), c)
                     }
                 }
@@ -228,34 +670,146 @@ impl SimVehicle {
                     [0.0; 4]
                 }
             };
-            match self.plant.step(&rotor_cmd, &Disturbance::default(), STEP) {
+            let contact = self.plant.step(&rotor_cmd, &Disturbance::default(), STEP);
+            match contact {
                 Contact::OnGround | Contact::Touchdown { .. } => self.landed = true,
                 Contact::Airborne => self.landed = false,
                 Contact::Crash { .. } => {}
             }
             self.t += STEP;
-            if self
-                .last_odometry
-                .is_none_or(|t| self.t - t >= self.cfg.odometry_period - 1e-9)
-            {
-                self.last_odometry = Some(self.t);
-                out.push(odometry(&e, self.t));
-            }
-            if self.last_sys_state.is_none_or(|t| self.t - t >= 1.0) {
-                self.last_sys_state = Some(self.t);
-                out.push(MavMessage::EXTENDED_SYS_STATE(
-                    mc::EXTENDED_SYS_STATE_DATA {
-                        vtol_state: MavVtolState::MAV_VTOL_STATE_UNDEFINED,
-                        landed_state: if self.landed {
-                            MavLandedState::MAV_LANDED_STATE_ON_GROUND
-                        } else {
-                            MavLandedState::MAV_LANDED_STATE_IN_AIR
-                        },
-                    },
-                ));
-            }
+            self.note_step(contact, offboard);
+            self.stream(&e, &mut out);
         }
         out
+    }
+
+    /// Updates the flight record after a step that ended in `contact`.
+    fn note_step(&mut self, contact: Contact, offboard: bool) {
+        let s = self.plant.state();
+        let r = &mut self.record;
+        r.time = self.t;
+        r.final_position = s.p;
+        match contact {
+            Contact::Airborne => {
+                r.airborne_time += STEP;
+                r.first_liftoff.get_or_insert(self.t - STEP);
+                let z = s.p.z;
+                r.max_height = Some(r.max_height.map_or(z, |m| m.max(z)));
+                r.min_height = Some(r.min_height.map_or(z, |m| m.min(z)));
+            }
+            Contact::Touchdown {
+                vertical_speed,
+                horizontal_speed,
+                tilt,
+            } => r.touchdowns.push(TouchdownRecord {
+                time: self.t,
+                vertical_speed,
+                horizontal_speed,
+                tilt,
+                position: s.p,
+            }),
+            Contact::Crash {
+                reason,
+                vertical_speed,
+                horizontal_speed,
+                tilt,
+                time,
+            } => {
+                if r.crashed.is_none() {
+                    r.crashed = Some(format!(
+                        "{reason:?}: {vertical_speed:.2} m/s down, {horizontal_speed:.2} m/s \
+                         across, tilt {:.1} deg",
+                        tilt.to_degrees()
+                    ));
+                    r.crash_time = Some(time);
+                }
+            }
+            Contact::OnGround => {}
+        }
+        if offboard && !contact.is_crash() {
+            r.offboard_pitch_rotation += s.w.y * STEP;
+            r.offboard_max_pitch_rate = r.offboard_max_pitch_rate.max(s.w.y.abs());
+        }
+    }
+
+    /// The streamed messages due now, at their current rates.
+    fn stream(&mut self, e: &Estimate, out: &mut Vec<MavMessage>) {
+        let now = self.t;
+        for i in 0..self.streams.len() {
+            let Some(s) = self.streams.get(i).copied() else {
+                continue;
+            };
+            let period = match self.commander.message_interval(s.id) {
+                Some(MessageInterval::Every(p)) => Some(p),
+                Some(MessageInterval::Stopped) => None,
+                Some(MessageInterval::Default) | None => s.default,
+            };
+            let mut s = s;
+            if period != s.period {
+                s.period = period;
+                s.next = s.last.zip(period).map_or(now, |(l, p)| (l + p).max(now));
+            }
+            if let Some(p) = s.period
+                && now + 1e-9 >= s.next
+            {
+                s.last = Some(now);
+                // Keep the average rate (no drift from the 1 ms step), but never queue up.
+                s.next = if s.next + p > now {
+                    s.next + p
+                } else {
+                    now + p
+                };
+                out.push(self.message(s.id, e));
+            }
+            if let Some(slot) = self.streams.get_mut(i) {
+                *slot = s;
+            }
+        }
+    }
+
+    /// Streamed message `id` now, from estimate `e`.
+    fn message(&self, id: u32, e: &Estimate) -> MavMessage {
+        let time_boot_ms = (self.t * 1e3).round() as u32;
+        match id {
+            mc::LOCAL_POSITION_NED_DATA::ID => {
+                let p = enu_to_ned(&e.p);
+                let v = enu_to_ned(&e.v);
+                MavMessage::LOCAL_POSITION_NED(mc::LOCAL_POSITION_NED_DATA {
+                    time_boot_ms,
+                    x: p.x as f32,
+                    y: p.y as f32,
+                    z: p.z as f32,
+                    vx: v.x as f32,
+                    vy: v.y as f32,
+                    vz: v.z as f32,
+                })
+            }
+            mc::ATTITUDE_QUATERNION_DATA::ID => {
+                let [q1, q2, q3, q4] = quat_to_mavlink(&quat_enu_flu_to_ned_frd(&e.q));
+                let w = flu_to_frd(&e.w);
+                MavMessage::ATTITUDE_QUATERNION(mc::ATTITUDE_QUATERNION_DATA {
+                    time_boot_ms,
+                    q1,
+                    q2,
+                    q3,
+                    q4,
+                    rollspeed: w.x as f32,
+                    pitchspeed: w.y as f32,
+                    yawspeed: w.z as f32,
+                })
+            }
+            mc::EXTENDED_SYS_STATE_DATA::ID => {
+                MavMessage::EXTENDED_SYS_STATE(mc::EXTENDED_SYS_STATE_DATA {
+                    vtol_state: MavVtolState::MAV_VTOL_STATE_UNDEFINED,
+                    landed_state: if self.landed {
+                        MavLandedState::MAV_LANDED_STATE_ON_GROUND
+                    } else {
+                        MavLandedState::MAV_LANDED_STATE_IN_AIR
+                    },
+                })
+            }
+            _ => odometry(e, self.t),
+        }
     }
 }
 
@@ -293,6 +847,18 @@ pub fn serve(
     duration: f64,
     stop: &std::sync::atomic::AtomicBool,
 ) -> usize {
+    serve_with(link, vehicle, duration, stop, |_| true)
+}
+
+/// [`serve`], calling `on_tick` after every 4 ms step (to report progress); serving ends
+/// early when it returns false.
+pub fn serve_with(
+    link: &crate::transport::Link,
+    vehicle: &mut SimVehicle,
+    duration: f64,
+    stop: &std::sync::atomic::AtomicBool,
+    mut on_tick: impl FnMut(&SimVehicle) -> bool,
+) -> usize {
     use std::time::{Duration, Instant};
     const TICK: f64 = 0.004;
     let start = Instant::now();
@@ -313,6 +879,9 @@ pub fn serve(
         while vehicle.time() - t0 + TICK <= now + 1e-9 {
             for m in vehicle.step(TICK) {
                 let _ = link.send(&m);
+            }
+            if !on_tick(vehicle) {
+                return received;
             }
         }
         std::thread::sleep(Duration::from_millis(1));

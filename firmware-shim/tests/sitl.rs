@@ -216,3 +216,83 @@ fn the_session_flies_the_simulated_px4_and_notices_its_failsafe() {
     assert!(noticed >= failsafe && noticed - failsafe <= 1.0 + dt + 1e-9);
     assert_eq!(px4.mode(), Px4Mode::Position);
 }
+
+/// MAV_CMD_SET_MESSAGE_INTERVAL as PX4's mavlink module takes it: param1 the id (rounded),
+/// param2 the interval in microseconds (negative stops, 0 restores the default), one ACK;
+/// FAILED for HEARTBEAT, for messages the vehicle does not stream and for options PX4 does
+/// not support (param3, param4, param7 not 0).
+#[test]
+fn set_message_interval_sets_the_stream_rates_as_px4() {
+    use firmware_shim::sitl::{MessageInterval, STREAMED_MESSAGES};
+    use mavlink::dialects::common::{COMMAND_LONG_DATA, MavCmd};
+    let cmd = |p1: f32, p2: f32, p3: f32, p7: f32| {
+        MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
+            param1: p1,
+            param2: p2,
+            param3: p3,
+            param7: p7,
+            command: MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
+            target_system: 1,
+            target_component: 1,
+            ..COMMAND_LONG_DATA::DEFAULT
+        })
+    };
+    let mut px4 = Commander::new(CommanderConfig::default());
+    assert_eq!(STREAMED_MESSAGES, [31, 32, 245, 331]);
+    for id in STREAMED_MESSAGES {
+        assert_eq!(px4.message_interval(id), Some(MessageInterval::Default));
+    }
+    assert_eq!(px4.message_interval(30), None);
+    let ok = [MavResult::MAV_RESULT_ACCEPTED];
+    let failed = [MavResult::MAV_RESULT_FAILED];
+    // The shim's request: ODOMETRY at 100 Hz.
+    let shim = messages::command_long(
+        messages::Command::MessageInterval {
+            message_id: 331,
+            hz: 100.0,
+        },
+        0,
+    );
+    assert_eq!(results(&px4.on_message(&shim, 0.0)), ok);
+    let Some(MessageInterval::Every(p)) = px4.message_interval(331) else {
+        panic!("{:?}", px4.message_interval(331))
+    };
+    assert!((p - 0.01).abs() < 1e-9, "{p}");
+    // The id is rounded as PX4 does; -1 (any negative) stops; 0 and NaN restore the default.
+    assert_eq!(
+        results(&px4.on_message(&cmd(30.6, -1.0, 0.0, 0.0), 0.0)),
+        ok
+    );
+    assert_eq!(px4.message_interval(31), Some(MessageInterval::Stopped));
+    assert_eq!(
+        results(&px4.on_message(&cmd(32.0, -5.0, 0.0, 0.0), 0.0)),
+        ok
+    );
+    assert_eq!(px4.message_interval(32), Some(MessageInterval::Stopped));
+    assert_eq!(results(&px4.on_message(&cmd(31.0, 0.0, 0.0, 0.0), 0.0)), ok);
+    assert_eq!(px4.message_interval(31), Some(MessageInterval::Default));
+    assert_eq!(
+        results(&px4.on_message(&cmd(32.0, f32::NAN, 0.0, 0.0), 0.0)),
+        ok
+    );
+    assert_eq!(px4.message_interval(32), Some(MessageInterval::Default));
+    // PX4 answers FAILED and changes nothing for these.
+    for bad in [
+        cmd(0.0, 1e6, 0.0, 0.0),      // HEARTBEAT
+        cmd(105.0, 1e4, 0.0, 0.0),    // HIGHRES_IMU: not simulated
+        cmd(-331.0, 1e4, 0.0, 0.0),   // no such id
+        cmd(f32::NAN, 1e4, 0.0, 0.0), // id 0
+        cmd(331.0, 5e4, 1.0, 0.0),    // param3: unsupported
+        cmd(331.0, 5e4, 0.0, 2.0),    // param7: response target
+    ] {
+        assert_eq!(results(&px4.on_message(&bad, 0.0)), failed, "{bad:?}");
+    }
+    let kept = px4.message_interval(331);
+    assert!(
+        matches!(kept, Some(MessageInterval::Every(p)) if (p - 0.01).abs() < 1e-9),
+        "{kept:?}"
+    );
+    // Not a mode change: the mode and arming are untouched.
+    assert_eq!(px4.mode(), Px4Mode::Position);
+    assert!(!px4.armed());
+}
