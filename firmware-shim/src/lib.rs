@@ -33,6 +33,8 @@
 pub mod frames;
 pub mod link;
 pub mod messages;
+pub mod pilot;
+pub mod relay;
 pub mod setpoint;
 pub mod sitl;
 pub mod transport;

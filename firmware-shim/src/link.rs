@@ -7,11 +7,15 @@
 //!
 //! Sequence (as PX4 v1.16 accepted it on SITL, `shared/anchors/PX4_OFFBOARD.md`):
 //!
+//! 0. ask for ODOMETRY at [`LinkConfig::odometry_rate`] (MAV_CMD_SET_MESSAGE_INTERVAL; PX4
+//!    streams it at 30 Hz on the onboard link otherwise); a refusal is not fatal;
 //! 1. stream setpoints for at least [`LinkConfig::stream_before_offboard`] (1 s);
 //! 2. MAV_CMD_DO_SET_MODE OFFBOARD, until acknowledged (retries, timeouts; duplicate acks are
 //!    fine) and the HEARTBEAT shows OFFBOARD (it may take up to 1 s to show);
 //! 3. MAV_CMD_COMPONENT_ARM_DISARM arm, until acknowledged and the HEARTBEAT shows armed;
-//! 4. flying: the MPC's setpoints fly the vehicle.
+//! 4. flying: the MPC's setpoints fly the vehicle;
+//! 5. when the mission is over ([`Session::finish`], on the ground): AUTO.LAND, which makes
+//!    PX4 disarm on its own ([`Phase::Done`] once the HEARTBEAT shows it disarmed).
 //!
 //! Failsafes while flying:
 //!
@@ -50,11 +54,14 @@ pub struct LinkConfig {
     pub odometry_timeout: f64,
     /// This many consecutive solver failures: return mode.
     pub max_solver_failures: u32,
+    /// ODOMETRY rate asked of PX4 at the start [Hz] (0: do not ask).
+    pub odometry_rate: f32,
 }
 
 impl Default for LinkConfig {
     /// Heartbeat 1 s, ack timeout 0.5 s with 3 retries, 1 s of streaming before OFFBOARD,
-    /// 2 s for the heartbeat to confirm, odometry timeout 0.1 s, 5 solver failures.
+    /// 2 s for the heartbeat to confirm, odometry timeout 0.1 s, 5 solver failures, ODOMETRY
+    /// at 100 Hz.
     fn default() -> Self {
         Self {
             heartbeat_period: 1.0,
@@ -64,7 +71,70 @@ impl Default for LinkConfig {
             confirm_timeout: 2.0,
             odometry_timeout: 0.1,
             max_solver_failures: 5,
+            odometry_rate: 100.0,
         }
+    }
+}
+
+/// A [`LinkConfig`] value that cannot work.
+#[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
+#[error("link setting {name} = {value} is invalid: {why}")]
+pub struct LinkConfigError {
+    /// The field.
+    pub name: &'static str,
+    /// Its value.
+    pub value: f64,
+    /// What it must be.
+    pub why: &'static str,
+}
+
+impl LinkConfig {
+    /// Checks every setting.
+    ///
+    /// # Errors
+    /// [`LinkConfigError`] naming the first bad field and what it must be.
+    pub fn validate(&self) -> Result<(), LinkConfigError> {
+        let positive = [
+            ("heartbeat_period", self.heartbeat_period),
+            ("ack_timeout", self.ack_timeout),
+            ("confirm_timeout", self.confirm_timeout),
+            ("odometry_timeout", self.odometry_timeout),
+        ];
+        for (name, value) in positive {
+            if !(value.is_finite() && value > 0.0) {
+                return Err(LinkConfigError {
+                    name,
+                    value,
+                    why: "a finite time > 0 s",
+                });
+            }
+        }
+        let checks = [
+            (
+                "stream_before_offboard",
+                self.stream_before_offboard,
+                self.stream_before_offboard.is_finite() && self.stream_before_offboard >= 0.5,
+                "at least 0.5 s (PX4 needs the stream before it accepts OFFBOARD)",
+            ),
+            (
+                "max_solver_failures",
+                f64::from(self.max_solver_failures),
+                self.max_solver_failures >= 1,
+                "at least 1",
+            ),
+            (
+                "odometry_rate",
+                f64::from(self.odometry_rate),
+                self.odometry_rate.is_finite() && (0.0..=1000.0).contains(&self.odometry_rate),
+                "0 (do not ask) or a rate up to 1000 Hz",
+            ),
+        ];
+        for (name, value, ok, why) in checks {
+            if !ok {
+                return Err(LinkConfigError { name, value, why });
+            }
+        }
+        Ok(())
     }
 }
 
@@ -99,6 +169,10 @@ pub enum Phase {
     Failsafe(Failsafe),
     /// The session could not start (a command was refused or never acknowledged).
     Failed(SessionError),
+    /// The mission is over: AUTO.LAND requested so that PX4 disarms.
+    Finishing,
+    /// Over: PX4 shows the vehicle disarmed after [`Session::finish`].
+    Done,
 }
 
 /// Why a session could not start.
@@ -149,6 +223,8 @@ pub struct Session {
     armed: bool,
     solver_failures: u32,
     abort: bool,
+    interval_requested: bool,
+    finish: bool,
 }
 
 impl Session {
@@ -164,6 +240,8 @@ impl Session {
             armed: false,
             solver_failures: 0,
             abort: false,
+            interval_requested: false,
+            finish: false,
         }
     }
 
@@ -201,7 +279,10 @@ impl Session {
                     if accepted {
                         p.acked_at.get_or_insert(now);
                     } else if !in_progress {
-                        if matches!(self.phase, Phase::Failsafe(_)) {
+                        if matches!(p.cmd, Command::MessageInterval { .. }) {
+                            // Not fatal: PX4 keeps its default rate.
+                            self.pending = None;
+                        } else if matches!(self.phase, Phase::Failsafe(_) | Phase::Finishing) {
                             // Keep asking: a failsafe has no better option.
                             p.sent_at = f64::NEG_INFINITY;
                         } else {
@@ -227,6 +308,15 @@ impl Session {
     /// The operator asks to stop (Ctrl-C): the next tick requests AUTO.LAND.
     pub fn abort(&mut self) {
         self.abort = true;
+    }
+
+    /// The mission is over and the vehicle is on the ground: the next tick requests AUTO.LAND
+    /// (PX4 disarms on its own after landing; a disarm command would be refused while its
+    /// land detector still says airborne). Only while flying; otherwise ignored.
+    pub fn finish(&mut self) {
+        if self.phase == Phase::Flying {
+            self.finish = true;
+        }
     }
 
     fn start(&mut self, cmd: Command, now: f64, out: &mut Vec<MavMessage>) {
@@ -283,13 +373,19 @@ impl Session {
             } else if let Some(ta) = p.acked_at {
                 if now - ta > self.cfg.confirm_timeout {
                     self.pending = None;
-                    if !matches!(self.phase, Phase::Failsafe(_)) {
+                    if !matches!(self.phase, Phase::Failsafe(_) | Phase::Finishing) {
                         self.phase = Phase::Failed(SessionError::NotConfirmed(p.cmd.mav_cmd()));
                     }
                 }
             } else if now - p.sent_at >= self.cfg.ack_timeout {
-                let failsafe = matches!(self.phase, Phase::Failsafe(_));
-                if p.attempts >= self.cfg.retries && !failsafe {
+                let keep_asking = matches!(self.phase, Phase::Failsafe(_) | Phase::Finishing);
+                if p.attempts >= self.cfg.retries
+                    && matches!(p.cmd, Command::MessageInterval { .. })
+                {
+                    // Not fatal: PX4 keeps its default rate (the setpoints tell whether
+                    // anyone listens).
+                    self.pending = None;
+                } else if p.attempts >= self.cfg.retries && !keep_asking {
                     self.pending = None;
                     self.phase = Phase::Failed(SessionError::NoAck(p.cmd.mav_cmd()));
                 } else {
@@ -306,7 +402,7 @@ impl Session {
         if self.abort
             && !matches!(
                 self.phase,
-                Phase::Failsafe(Failsafe::Abort) | Phase::Failed(_)
+                Phase::Failsafe(Failsafe::Abort) | Phase::Failed(_) | Phase::Done
             )
         {
             self.engage(Failsafe::Abort, now, &mut tick);
@@ -314,7 +410,14 @@ impl Session {
         }
         match self.phase {
             Phase::Streaming { since } => {
-                if now - since >= self.cfg.stream_before_offboard {
+                if !self.interval_requested && self.cfg.odometry_rate > 0.0 {
+                    self.interval_requested = true;
+                    let cmd = Command::MessageInterval {
+                        message_id: messages::ODOMETRY_ID,
+                        hz: self.cfg.odometry_rate,
+                    };
+                    self.start(cmd, now, &mut tick.send);
+                } else if now - since >= self.cfg.stream_before_offboard && self.pending.is_none() {
                     self.phase = Phase::RequestingOffboard;
                     self.start(Command::SetMode(Px4Mode::Offboard), now, &mut tick.send);
                 }
@@ -331,6 +434,10 @@ impl Session {
                     self.solver_failures = 0;
                 }
             }
+            Phase::Flying if self.finish => {
+                self.phase = Phase::Finishing;
+                self.start(Command::SetMode(Px4Mode::Land), now, &mut tick.send);
+            }
             Phase::Flying => {
                 let stale = self
                     .last_odometry
@@ -343,7 +450,12 @@ impl Session {
                     self.engage(Failsafe::Px4LeftOffboard, now, &mut tick);
                 }
             }
-            Phase::Failsafe(_) | Phase::Failed(_) => {}
+            Phase::Finishing => {
+                if self.pending.is_none() && !self.armed {
+                    self.phase = Phase::Done;
+                }
+            }
+            Phase::Failsafe(_) | Phase::Failed(_) | Phase::Done => {}
         }
         tick.mpc_in_control = self.phase == Phase::Flying;
         tick

@@ -30,6 +30,8 @@ pub const PX4_SYSTEM: u8 = 1;
 pub const PX4_COMPONENT: u8 = 1;
 /// Our component id: MAV_COMP_ID_ONBOARD_COMPUTER.
 pub const COMPANION_COMPONENT: u8 = 191;
+/// MAVLink message id of ODOMETRY (for MAV_CMD_SET_MESSAGE_INTERVAL).
+pub const ODOMETRY_ID: u32 = 331;
 
 /// PX4 main modes (`custom_mode` bits 16-23).
 const MAIN_POSCTL: u8 = 3;
@@ -125,6 +127,26 @@ pub fn heartbeat() -> MavMessage {
         system_status: MavState::MAV_STATE_ACTIVE,
         mavlink_version: 3,
     })
+}
+
+/// PX4's hover thrust parameter (normalized thrust of a hover, its hover-thrust estimator's
+/// output when `MPC_USE_HTE` is set).
+pub const HOVER_THRUST_PARAM: &str = "MPC_THR_HOVER";
+
+/// PARAM_REQUEST_READ of the parameter `name` (at most 16 bytes) from PX4's autopilot.
+pub fn param_request_read(name: &str) -> MavMessage {
+    MavMessage::PARAM_REQUEST_READ(mc::PARAM_REQUEST_READ_DATA {
+        param_index: -1,
+        target_system: PX4_SYSTEM,
+        target_component: PX4_COMPONENT,
+        param_id: name.into(),
+    })
+}
+
+/// Whether a NUL-padded parameter name is `name`.
+pub fn param_name_is(padded: &[u8; 16], name: &str) -> bool {
+    let len = padded.iter().position(|&b| b == 0).unwrap_or(padded.len());
+    padded.get(..len) == Some(name.as_bytes())
 }
 
 /// SET_ATTITUDE_TARGET with body rates `rates_frd` [rad/s] and normalized thrust in [0, 1];
@@ -227,6 +249,13 @@ pub enum Inbound {
     },
     /// EXTENDED_SYS_STATE's landed state.
     Landed(LandedState),
+    /// PARAM_VALUE: a parameter's name (NUL-padded) and value (REAL32 parameters only).
+    Param {
+        /// The name, NUL-padded to 16 bytes.
+        name: [u8; 16],
+        /// The value.
+        value: f32,
+    },
     /// COMMAND_ACK.
     Ack {
         /// The command acknowledged.
@@ -333,6 +362,12 @@ pub fn classify(header: &MavHeader, msg: &MavMessage) -> Inbound {
             MavLandedState::MAV_LANDED_STATE_LANDING => LandedState::Landing,
             MavLandedState::MAV_LANDED_STATE_UNDEFINED => LandedState::Undefined,
         }),
+        MavMessage::PARAM_VALUE(p) if p.param_type == mc::MavParamType::MAV_PARAM_TYPE_REAL32 => {
+            Inbound::Param {
+                name: p.param_id.into(),
+                value: p.param_value,
+            }
+        }
         MavMessage::COMMAND_ACK(a) => Inbound::Ack {
             command: a.command,
             accepted: a.result == MavResult::MAV_RESULT_ACCEPTED,

@@ -34,6 +34,16 @@ fn commands(msgs: &[MavMessage]) -> Vec<(MavCmd, f32, u8)> {
         .collect()
 }
 
+/// The param3 of the commands in `msgs` (the sub mode of DO_SET_MODE).
+fn param3(msgs: &[MavMessage]) -> Vec<f32> {
+    msgs.iter()
+        .filter_map(|m| match m {
+            MavMessage::COMMAND_LONG(c) => Some(c.param3),
+            _ => None,
+        })
+        .collect()
+}
+
 /// A well-behaved PX4: acknowledges every command (twice, as PX4 v1.16 did for the mode),
 /// shows the mode and the armed flag in the next heartbeat, streams odometry.
 struct Px4 {
@@ -41,6 +51,7 @@ struct Px4 {
     armed: bool,
     odometry: bool,
     acks: bool,
+    interval_ok: bool,
 }
 
 impl Px4 {
@@ -50,15 +61,17 @@ impl Px4 {
             armed: false,
             odometry: true,
             acks: true,
+            interval_ok: true,
         }
     }
 
     fn answer(&mut self, s: &mut Session, sent: &[MavMessage], now: f64) {
-        for (cmd, p2, _) in commands(sent) {
+        for ((cmd, p2, _), p3) in commands(sent).into_iter().zip(param3(sent)) {
             match cmd {
                 MavCmd::MAV_CMD_DO_SET_MODE => {
                     self.mode = match p2 as u8 {
                         6 => Px4Mode::Offboard,
+                        4 if p3 as u8 == 6 => Px4Mode::Land,
                         4 => Px4Mode::Return,
                         _ => self.mode,
                     };
@@ -72,6 +85,9 @@ impl Px4 {
                     if self.acks {
                         s.on_inbound(&ack(cmd, true), now);
                     }
+                }
+                MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL if self.acks => {
+                    s.on_inbound(&ack(cmd, self.interval_ok), now);
                 }
                 _ => {}
             }
@@ -152,15 +168,26 @@ fn unacknowledged_commands_are_retried_then_the_session_fails() {
         acks: false,
         ..Px4::new()
     };
-    let log = run(&mut s, &mut px4, 0.0, 4.0);
-    let modes: Vec<(f64, u8)> = log
-        .iter()
-        .flat_map(|(t, m)| {
-            commands(std::slice::from_ref(m))
-                .into_iter()
-                .map(move |c| (*t, c.2))
-        })
-        .collect();
+    let log = run(&mut s, &mut px4, 0.0, 6.0);
+    let sent = |which: MavCmd| -> Vec<(f64, u8)> {
+        log.iter()
+            .flat_map(|(t, m)| {
+                commands(std::slice::from_ref(m))
+                    .into_iter()
+                    .filter(|c| c.0 == which)
+                    .map(move |c| (*t, c.2))
+            })
+            .collect()
+    };
+    // The ODOMETRY rate request goes unanswered too: retried, then given up without failing
+    // the session (PX4 would keep its default rate).
+    let interval = sent(MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL);
+    assert_eq!(interval.len(), 1 + usize::from(cfg.retries), "{interval:?}");
+    let modes = sent(MavCmd::MAV_CMD_DO_SET_MODE);
+    assert!(
+        modes[0].0 >= interval.last().unwrap().0 + cfg.ack_timeout - 1e-9,
+        "one command at a time: {modes:?}"
+    );
     // The first request and `retries` retransmissions, `ack_timeout` apart, with the
     // confirmation count going up.
     assert_eq!(modes.len(), 1 + usize::from(cfg.retries), "{modes:?}");
@@ -181,7 +208,11 @@ fn unacknowledged_commands_are_retried_then_the_session_fails() {
 
 #[test]
 fn a_refused_command_fails_the_session_with_the_command_named() {
-    let mut s = Session::new(LinkConfig::default(), 0.0);
+    let cfg = LinkConfig {
+        odometry_rate: 0.0,
+        ..LinkConfig::default()
+    };
+    let mut s = Session::new(cfg, 0.0);
     let _ = s.tick(0.0);
     let t = s.tick(1.0);
     assert_eq!(commands(&t.send).len(), 1);
@@ -288,4 +319,77 @@ fn abort_lands_and_px4_leaving_offboard_is_noticed() {
         commands(&tick.send).is_empty(),
         "PX4 decided; we do not fight it"
     );
+}
+
+#[test]
+fn odometry_rate_is_asked_first_and_a_refusal_is_not_fatal() {
+    let cfg = LinkConfig::default();
+    let mut s = Session::new(cfg, 0.0);
+    let first = s.tick(0.0);
+    let c = first
+        .send
+        .iter()
+        .find_map(|m| match m {
+            MavMessage::COMMAND_LONG(c) => Some(c.clone()),
+            _ => None,
+        })
+        .expect("a command at the first tick");
+    assert_eq!(c.command, MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL);
+    assert_eq!(c.param1, 331.0, "ODOMETRY");
+    assert_eq!(c.param2, 1e6 / cfg.odometry_rate, "interval in us");
+    let mut px4 = Px4 {
+        interval_ok: false,
+        ..Px4::new()
+    };
+    px4.answer(&mut s, &first.send, 0.0);
+    let _ = run(&mut s, &mut px4, DT, 3.0);
+    assert_eq!(s.phase(), Phase::Flying);
+}
+
+#[test]
+fn finish_lands_and_the_session_is_done_when_px4_disarms() {
+    let (mut s, mut px4) = flying();
+    s.finish();
+    let tick = s.tick(3.0);
+    assert!(!tick.mpc_in_control);
+    assert_eq!(tick.failsafe, None);
+    assert_eq!(
+        commands(&tick.send),
+        vec![(MavCmd::MAV_CMD_DO_SET_MODE, 4.0, 0)]
+    );
+    assert_eq!(param3(&tick.send), vec![6.0], "AUTO.LAND");
+    assert_eq!(s.phase(), Phase::Finishing);
+    px4.answer(&mut s, &tick.send, 3.0);
+    let _ = run(&mut s, &mut px4, 3.0 + DT, 3.5);
+    assert_eq!(s.phase(), Phase::Finishing, "still armed");
+    px4.armed = false; // PX4 disarmed after landing
+    let _ = run(&mut s, &mut px4, 3.5, 3.6);
+    assert_eq!(s.phase(), Phase::Done);
+    // finish() outside flight does nothing.
+    let mut idle = Session::new(LinkConfig::default(), 0.0);
+    idle.finish();
+    let _ = idle.tick(0.0);
+    assert!(matches!(idle.phase(), Phase::Streaming { .. }));
+}
+
+#[test]
+fn bad_link_settings_are_named() {
+    assert!(LinkConfig::default().validate().is_ok());
+    let bad = LinkConfig {
+        odometry_timeout: 0.0,
+        ..LinkConfig::default()
+    };
+    let e = bad.validate().unwrap_err();
+    assert_eq!(e.name, "odometry_timeout");
+    assert!(e.to_string().contains("odometry_timeout = 0"), "{e}");
+    let bad = LinkConfig {
+        stream_before_offboard: 0.1,
+        ..LinkConfig::default()
+    };
+    assert_eq!(bad.validate().unwrap_err().name, "stream_before_offboard");
+    let bad = LinkConfig {
+        odometry_rate: f32::NAN,
+        ..LinkConfig::default()
+    };
+    assert_eq!(bad.validate().unwrap_err().name, "odometry_rate");
 }

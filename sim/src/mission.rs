@@ -139,6 +139,8 @@ pub struct MissionConfig {
     pub recover_time: f64,
     /// Duration of the hold at the rally point after the recovery leg.
     pub hold_time: f64,
+    /// Duration of the hold of the `hover` mission.
+    pub hover_time: f64,
     /// Position step of the `step` mission [m].
     pub step: Vector3<f64>,
     /// Duration of the return leg.
@@ -178,6 +180,7 @@ impl MissionConfig {
             flip_thrust: 5.0,
             recover_time: 1.5,
             hold_time: 2.5,
+            hover_time: 5.0,
             step: Vector3::new(1.0, 0.0, 0.0),
             return_time: 3.5,
             land_time: 3.0,
@@ -737,7 +740,7 @@ impl Mission {
             Phase::Hold => {
                 let hold = match self.cfg.kind {
                     MissionKind::Flip => self.cfg.hold_time,
-                    MissionKind::Hover => 5.0,
+                    MissionKind::Hover => self.cfg.hover_time,
                     MissionKind::Step => self.cfg.settle_time,
                 };
                 if elapsed >= hold {

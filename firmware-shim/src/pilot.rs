@@ -1,0 +1,1000 @@
+//! The controller loop: PX4's state in, the generated NMPC's body-rate + thrust setpoints out,
+//! the mission state machine of the simulator (`mpc_sim::mission`) in between, the offboard
+//! [`Session`] with its failsafes around it. Clocked by the caller ([`Pilot::poll`] every
+//! millisecond or so, [`Pilot::on_message`] for everything received); [`run`] is that loop on
+//! a [`Link`].
+//!
+//! * State: ODOMETRY (preferred), or LOCAL_POSITION_NED + ATTITUDE_QUATERNION pairs less than
+//!   [`PAIR_WINDOW_US`] apart when no ODOMETRY came for [`ODOMETRY_PREFERENCE_US`] of vehicle
+//!   time. A state not newer than the last one (a duplicate, or overtaken on a lossy link) or
+//!   not finite is dropped and counted. NED/FRD is converted to the models' ENU/FLU.
+//! * Clock: the vehicle's, estimated from the states' timestamps and arrival times (the least
+//!   delayed state sets the offset to the wall clock); it runs at the wall clock's rate
+//!   between states, never backwards. The mission, the 20 Hz solver and the
+//!   setpoint stream ([`PilotConfig::setpoint_rate`]) are scheduled on it, so a simulator that
+//!   runs faster than real time still gets a setpoint per simulated period (PX4 scales its
+//!   timeouts with its speed-up factor); the session's timeouts run on it too, so between
+//!   states (and in a blackout) they are wall time.
+//! * Latency: the estimate handed to the solver is the last state brought forward to the
+//!   solve time (its age, at most [`MAX_PREDICTION_S`]) under the setpoints sent since
+//!   ([`predict`]: rates and thrust as first-order lags, attitude, velocity, position), as
+//!   PX4's own output predictor does with the IMU.
+//! * Flight: when the session is flying (OFFBOARD and armed), the mission starts at its
+//!   take-off from where the vehicle stands (the mission's positions are relative to that
+//!   point). When the mission has landed, [`Session::finish`] asks for AUTO.LAND, and PX4
+//!   disarms. The mission's own pose-loss return mode is not used: stale odometry is the
+//!   session's failsafe (PX4's AUTO.RTL).
+//! * Setpoints: the solver's first control, held between solves, through
+//!   [`make_setpoint`] (never non-finite, always in range); before the flight, an idle
+//!   setpoint (thrust 0: PX4 needs the stream before OFFBOARD, and arms on the ground). In a
+//!   failsafe the controller keeps running on the newest state (or its prediction) until PX4
+//!   has switched: the stream never pauses while PX4 may still be in OFFBOARD.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use mavlink::MavHeader;
+use mavlink::dialects::common::MavMessage;
+use mpc_sim::controller::{Controller, InnerCommand, NmpcController, OuterStats};
+use mpc_sim::estimator::Estimate;
+use mpc_sim::log::Sample;
+use mpc_sim::mission::{G, Mission, MissionConfig, MissionInput, Phase as MissionPhase};
+use mpc_sim::plant::QuadState;
+use mpc_sim::report::{self, TrialSummary};
+use mpc_sim::run::{Outcome, SimConfig, Touchdown, TrialResult};
+use nalgebra::{UnitQuaternion, Vector3};
+
+use crate::frames::{frd_to_flu, ned_to_enu, quat_from_mavlink, quat_ned_frd_to_enu_flu};
+use crate::link::{Failsafe, LinkConfig, LinkConfigError, Phase, Session};
+use crate::messages::{self, Inbound, LandedState, Px4Mode};
+use crate::setpoint::{Px4Setpoint, RateLimits, SetpointError, ThrustMap, make_setpoint};
+use crate::transport::Link;
+
+/// LOCAL_POSITION_NED and ATTITUDE_QUATERNION closer than this make one state [us].
+pub const PAIR_WINDOW_US: u64 = 25_000;
+/// ODOMETRY is preferred: the pairs are used only when none came for this long [us].
+pub const ODOMETRY_PREFERENCE_US: u64 = 500_000;
+/// The estimate is brought forward by its age, at most this much [s].
+pub const MAX_PREDICTION_S: f64 = 0.25;
+/// Height above the start point and speed below which the vehicle counts as on the ground.
+pub const GROUND_HEIGHT_M: f64 = 0.05;
+/// See [`GROUND_HEIGHT_M`] [m/s].
+pub const GROUND_SPEED_M_S: f64 = 0.2;
+
+/// Settings of the controller loop.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PilotConfig {
+    /// The offboard session's timing and failsafes.
+    pub link: LinkConfig,
+    /// The mission; its positions are relative to where the vehicle stands at the start
+    /// (`home` is that point, normally zero).
+    pub mission: MissionConfig,
+    /// Collective acceleration to PX4's normalized thrust (the vehicle's hover thrust);
+    /// `None`: read PX4's `MPC_THR_HOVER` before starting.
+    pub thrust_map: Option<ThrustMap>,
+    /// Body-rate bounds of the setpoints.
+    pub limits: RateLimits,
+    /// SET_ATTITUDE_TARGET rate [Hz], 25..=250.
+    pub setpoint_rate: f64,
+    /// Bring the estimate forward by its age before each solve.
+    pub predict: bool,
+}
+
+impl PilotConfig {
+    /// The loop for `mission` with the default link, the hover thrust read from PX4, the
+    /// models' rate bounds and setpoints at 100 Hz.
+    pub fn new(mission: MissionConfig) -> Self {
+        Self {
+            link: LinkConfig::default(),
+            mission,
+            thrust_map: None,
+            limits: RateLimits::default(),
+            setpoint_rate: 100.0,
+            predict: true,
+        }
+    }
+
+    /// Checks every setting.
+    ///
+    /// # Errors
+    /// [`PilotError`] naming the first bad setting.
+    pub fn validate(&self) -> Result<(), PilotError> {
+        self.link.validate()?;
+        if let Some(m) = &self.thrust_map {
+            m.validate()?;
+        }
+        self.limits.validate()?;
+        if !(self.setpoint_rate.is_finite() && (25.0..=250.0).contains(&self.setpoint_rate)) {
+            return Err(PilotError::SetpointRate(self.setpoint_rate));
+        }
+        Ok(())
+    }
+}
+
+/// A [`PilotConfig`] that cannot fly.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum PilotError {
+    /// A link setting.
+    #[error(transparent)]
+    Link(#[from] LinkConfigError),
+    /// The thrust map or the rate bounds.
+    #[error(transparent)]
+    Setpoint(#[from] SetpointError),
+    /// The setpoint rate.
+    #[error(
+        "setpoint rate {0} Hz is out of range: use 25 to 250 Hz (PX4 needs at least 2 Hz, the solver runs at 20 Hz)"
+    )]
+    SetpointRate(f64),
+}
+
+/// The vehicle's state in the models' frames (ENU world, FLU body).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct State {
+    /// Vehicle time [s].
+    pub t: f64,
+    /// Position [m].
+    pub p: Vector3<f64>,
+    /// Velocity [m/s].
+    pub v: Vector3<f64>,
+    /// Attitude, body to world.
+    pub q: UnitQuaternion<f64>,
+    /// Body rates [rad/s].
+    pub w: Vector3<f64>,
+}
+
+fn vec3(a: [f32; 3]) -> Vector3<f64> {
+    Vector3::new(f64::from(a[0]), f64::from(a[1]), f64::from(a[2]))
+}
+
+fn state_from_ned(
+    time_us: u64,
+    position: [f32; 3],
+    velocity: [f32; 3],
+    q: [f32; 4],
+    rates: [f32; 3],
+) -> Option<State> {
+    let q = quat_from_mavlink(q)?;
+    let s = State {
+        t: time_us as f64 * 1e-6,
+        p: ned_to_enu(&vec3(position)),
+        v: ned_to_enu(&vec3(velocity)),
+        q: quat_ned_frd_to_enu_flu(&q),
+        w: frd_to_flu(&vec3(rates)),
+    };
+    let finite =
+        s.p.iter()
+            .chain(s.v.iter())
+            .chain(s.w.iter())
+            .all(|x| x.is_finite());
+    finite.then_some(s)
+}
+
+/// Turns what PX4 sends into [`State`]s: ODOMETRY, or LOCAL_POSITION_NED +
+/// ATTITUDE_QUATERNION pairs; drops what is not newer than the last state.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct StateInput {
+    last_us: Option<u64>,
+    last_odometry_us: Option<u64>,
+    first_us: Option<u64>,
+    position: Option<(u64, [f32; 3], [f32; 3])>,
+    attitude: Option<(u64, [f32; 4], [f32; 3])>,
+    /// States dropped: duplicates, overtaken (older than the last), not finite.
+    pub dropped: u64,
+    /// States accepted.
+    pub accepted: u64,
+    /// Of those, made of LOCAL_POSITION_NED + ATTITUDE_QUATERNION.
+    pub from_pairs: u64,
+}
+
+impl StateInput {
+    /// A new state from `inbound`, if it makes one.
+    pub fn on_inbound(&mut self, inbound: &Inbound) -> Option<State> {
+        let (time_us, s) = match *inbound {
+            Inbound::Odometry(o) => {
+                self.last_odometry_us = Some(o.time_us);
+                (
+                    o.time_us,
+                    state_from_ned(o.time_us, o.position, o.velocity, o.q, o.rates),
+                )
+            }
+            Inbound::LocalPosition {
+                time_boot_ms,
+                position,
+                velocity,
+            } => {
+                let t = u64::from(time_boot_ms) * 1000;
+                self.first_us.get_or_insert(t);
+                self.position = Some((t, position, velocity));
+                self.pair(t)?
+            }
+            Inbound::Attitude {
+                time_boot_ms,
+                q,
+                rates,
+            } => {
+                let t = u64::from(time_boot_ms) * 1000;
+                self.first_us.get_or_insert(t);
+                self.attitude = Some((t, q, rates));
+                self.pair(t)?
+            }
+            _ => return None,
+        };
+        if self.last_us.is_some_and(|last| time_us <= last) {
+            self.dropped += 1;
+            return None;
+        }
+        let Some(s) = s else {
+            self.dropped += 1;
+            return None;
+        };
+        if !matches!(inbound, Inbound::Odometry(_)) {
+            self.from_pairs += 1;
+        }
+        self.last_us = Some(time_us);
+        self.accepted += 1;
+        Some(s)
+    }
+
+    /// A state from the newest position and attitude, when they are close enough in time and
+    /// ODOMETRY is not coming; stamped with the later of the two.
+    fn pair(&self, now_us: u64) -> Option<(u64, Option<State>)> {
+        // ODOMETRY is expected from the first state message on, until it has been missing
+        // for ODOMETRY_PREFERENCE_US.
+        let since = self.last_odometry_us.or(self.first_us).unwrap_or(now_us);
+        if now_us.saturating_sub(since) < ODOMETRY_PREFERENCE_US {
+            return None;
+        }
+        let (tp, position, velocity) = self.position?;
+        let (ta, q, rates) = self.attitude?;
+        if tp.abs_diff(ta) > PAIR_WINDOW_US {
+            return None;
+        }
+        let t = tp.max(ta);
+        Some((t, state_from_ned(t, position, velocity, q, rates)))
+    }
+}
+
+/// The vehicle's clock, estimated from the states' timestamps and their arrival times: the
+/// offset of the vehicle's clock over the wall clock is that of the least delayed state (a
+/// late state does not hold the clock back: it is older by its delay, which the prediction
+/// then makes up for), forgotten at [`CLOCK_DRIFT`] so that a clock drift or a change of the
+/// link's base latency is followed. Monotonic.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct VehicleClock {
+    offset: Option<f64>,
+    set_at: f64,
+    last: f64,
+}
+
+/// How fast the clock estimate forgets its least delay [s per s].
+pub const CLOCK_DRIFT: f64 = 1e-3;
+
+impl VehicleClock {
+    fn set(&mut self, vehicle: f64, wall: f64) {
+        let o = vehicle - wall;
+        self.offset = Some(match self.offset {
+            None => o,
+            Some(prev) => o.max(prev - CLOCK_DRIFT * (wall - self.set_at).max(0.0)),
+        });
+        self.set_at = wall;
+    }
+
+    fn started(&self) -> bool {
+        self.offset.is_some()
+    }
+
+    fn now(&mut self, wall: f64) -> Option<f64> {
+        let o = self.offset?;
+        self.last = self.last.max(wall + o);
+        Some(self.last)
+    }
+}
+
+/// Time constant of PX4's rate loop and rotors as the prediction models them [s]: the body
+/// rates and the thrust follow the setpoint as first-order lags.
+pub const RESPONSE_TIME_CONSTANT: f64 = 0.03;
+
+/// `s` brought forward to `until` (at most [`MAX_PREDICTION_S`]) in 2.5 ms steps, under the
+/// setpoints in `commands` (vehicle time each was sent, collective acceleration, body rates;
+/// in time order; the one in force at a time is the last sent before it): the body rates and
+/// the collective thrust follow the setpoint with [`RESPONSE_TIME_CONSTANT`] from the
+/// measured rates and the setpoint in force at `s.t`, the attitude turns by the rates,
+/// velocity and position follow thrust and gravity.
+pub fn predict(s: &State, commands: &[(f64, InnerCommand)], until: f64) -> State {
+    let age = (until - s.t).clamp(0.0, MAX_PREDICTION_S);
+    let steps = (age / 0.0025).ceil().max(1.0);
+    let h = age / steps;
+    let at = |t: f64| {
+        commands
+            .iter()
+            .rev()
+            .find(|(ts, _)| *ts <= t)
+            .or(commands.first())
+            .map_or(InnerCommand::default(), |(_, c)| *c)
+    };
+    let k = 1.0 - (-h / RESPONSE_TIME_CONSTANT).exp();
+    let mut out = *s;
+    let mut c = at(s.t).thrust_c;
+    for i in 0..steps as usize {
+        let cmd = at(s.t + i as f64 * h);
+        out.w += (cmd.rates - out.w) * k;
+        c += (cmd.thrust_c - c) * k;
+        let a = out.q * Vector3::new(0.0, 0.0, c) - Vector3::new(0.0, 0.0, G);
+        out.p += out.v * h + a * (0.5 * h * h);
+        out.v += a * h;
+        out.q *= UnitQuaternion::from_scaled_axis(out.w * h);
+    }
+    out.t = s.t + age;
+    out
+}
+
+/// What happened, with the vehicle time [s] it happened at.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Event {
+    /// Vehicle time [s].
+    pub t: f64,
+    /// What, in words.
+    pub what: String,
+}
+
+/// Mean, median, 99th percentile and maximum [ms].
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct PeriodStats {
+    /// Number of intervals.
+    pub count: usize,
+    /// Mean [ms].
+    pub mean_ms: f64,
+    /// Median [ms].
+    pub median_ms: f64,
+    /// 99th percentile (nearest rank) [ms].
+    pub p99_ms: f64,
+    /// Maximum [ms].
+    pub max_ms: f64,
+}
+
+impl PeriodStats {
+    /// Statistics of `values` [s].
+    pub fn of(values: &[f64]) -> Self {
+        let mut v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
+        if v.is_empty() {
+            return Self::default();
+        }
+        v.sort_by(f64::total_cmp);
+        let rank = |p: f64| {
+            let i = ((p * v.len() as f64).ceil() as usize).clamp(1, v.len()) - 1;
+            v.get(i).copied().unwrap_or(f64::NAN) * 1e3
+        };
+        Self {
+            count: v.len(),
+            mean_ms: v.iter().sum::<f64>() / v.len() as f64 * 1e3,
+            median_ms: rank(0.5),
+            p99_ms: rank(0.99),
+            max_ms: v.last().copied().unwrap_or(f64::NAN) * 1e3,
+        }
+    }
+}
+
+/// The figures of a flight as the controller saw it.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct FlightReport {
+    /// The mission's verdict on the telemetry (the simulator's criteria).
+    pub summary: Option<TrialSummary>,
+    /// How the session ended, in words.
+    pub session: String,
+    /// Failsafes engaged, with their vehicle time [s].
+    pub failsafes: Vec<(String, f64)>,
+    /// States accepted.
+    pub states: u64,
+    /// States dropped (duplicate, overtaken, not finite).
+    pub states_dropped: u64,
+    /// Setpoints sent.
+    pub setpoints: u64,
+    /// Setpoints clamped into range.
+    pub setpoints_clamped: u64,
+    /// Setpoints whose input was not finite (the previous one was sent).
+    pub setpoints_replaced: u64,
+    /// Wall-clock period of the setpoint stream (the loop's jitter).
+    pub setpoint_period: PeriodStats,
+    /// Wall-clock period of the solver steps.
+    pub solver_period: PeriodStats,
+    /// Solver time per step [us]: mean, p99, max.
+    pub solver_us: report::TimeStats,
+    /// Solver steps that fell back to the previous plan.
+    pub fallbacks: u64,
+}
+
+struct Flight {
+    t0: f64,
+    home: Vector3<f64>,
+    mission: Mission,
+    ctrl: NmpcController,
+    next_outer: f64,
+    cmd: InnerCommand,
+    samples: Vec<Sample>,
+    pitch_turned: f64,
+    flip_started: bool,
+    last_logged: Option<State>,
+    touchdown: Option<Touchdown>,
+    pending_stats: Option<OuterStats>,
+    on_ground: bool,
+    airborne: bool,
+    /// The setpoints of the last [`MAX_PREDICTION_S`] (vehicle time sent, command).
+    history: std::collections::VecDeque<(f64, InnerCommand)>,
+}
+
+/// The controller loop. See the [module documentation](self).
+pub struct Pilot {
+    cfg: PilotConfig,
+    map: Option<ThrustMap>,
+    param_requests: u32,
+    last_param_request: Option<f64>,
+    failure: Option<String>,
+    session: Option<Session>,
+    input: StateInput,
+    clock: VehicleClock,
+    state: Option<State>,
+    flight: Option<Flight>,
+    next_setpoint: f64,
+    last_setpoint: Option<Px4Setpoint>,
+    last_setpoint_wall: Option<f64>,
+    last_solve_wall: Option<f64>,
+    setpoint_periods: Vec<f64>,
+    solver_periods: Vec<f64>,
+    solver_us: Vec<f64>,
+    setpoints: u64,
+    clamped: u64,
+    replaced: u64,
+    fallbacks: u64,
+    abort: bool,
+    events: Vec<Event>,
+    failsafes: Vec<(Failsafe, f64)>,
+    last_odometry_t: Option<f64>,
+    link_delay: f64,
+    landed_state: Option<LandedState>,
+    was_armed: bool,
+    finished_at: Option<f64>,
+}
+
+impl Pilot {
+    /// A loop that waits for PX4's first state.
+    ///
+    /// # Errors
+    /// [`PilotError`] if the configuration cannot fly ([`PilotConfig::validate`]).
+    pub fn new(cfg: PilotConfig) -> Result<Self, PilotError> {
+        cfg.validate()?;
+        Ok(Self {
+            map: cfg.thrust_map,
+            param_requests: 0,
+            last_param_request: None,
+            failure: None,
+            cfg,
+            session: None,
+            input: StateInput::default(),
+            clock: VehicleClock::default(),
+            state: None,
+            flight: None,
+            next_setpoint: 0.0,
+            last_setpoint: None,
+            last_setpoint_wall: None,
+            last_solve_wall: None,
+            setpoint_periods: Vec::new(),
+            solver_periods: Vec::new(),
+            solver_us: Vec::new(),
+            setpoints: 0,
+            clamped: 0,
+            replaced: 0,
+            fallbacks: 0,
+            abort: false,
+            events: Vec::new(),
+            failsafes: Vec::new(),
+            last_odometry_t: None,
+            link_delay: 0.0,
+            landed_state: None,
+            was_armed: false,
+            finished_at: None,
+        })
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &PilotConfig {
+        &self.cfg
+    }
+
+    /// The session, once the first state has come.
+    pub fn session(&self) -> Option<&Session> {
+        self.session.as_ref()
+    }
+
+    /// The mission phase, once flying.
+    pub fn mission_phase(&self) -> Option<MissionPhase> {
+        self.flight.as_ref().map(|f| f.mission.phase())
+    }
+
+    /// The newest state.
+    pub fn state(&self) -> Option<&State> {
+        self.state.as_ref()
+    }
+
+    /// Everything that happened so far.
+    pub fn events(&self) -> &[Event] {
+        &self.events
+    }
+
+    /// The operator asks to stop: AUTO.LAND at the next poll.
+    pub fn abort(&mut self) {
+        self.abort = true;
+    }
+
+    /// Whether there is nothing more to do: the mission is over and PX4 disarmed, the session
+    /// could not start, or a failsafe handed the vehicle to PX4 and it has disarmed (or was
+    /// never armed).
+    pub fn finished(&self) -> bool {
+        if self.failure.is_some() {
+            return true;
+        }
+        let Some(s) = &self.session else {
+            return false;
+        };
+        match s.phase() {
+            Phase::Done | Phase::Failed(_) => true,
+            Phase::Failsafe(_) => {
+                let settled = self
+                    .failsafes
+                    .last()
+                    .filter(|_| self.clock.started())
+                    .is_some_and(|(_, t)| self.clock.last - t > 1.5);
+                !s.armed() && settled
+            }
+            _ => false,
+        }
+    }
+
+    fn event(&mut self, t: f64, what: String) {
+        self.events.push(Event { t, what });
+    }
+
+    /// Handles a message received at wall time `wall` [s].
+    pub fn on_message(&mut self, header: &MavHeader, msg: &MavMessage, wall: f64) {
+        let inbound = messages::classify(header, msg);
+        if let Inbound::Landed(l) = inbound {
+            self.landed_state = Some(l);
+        }
+        if let Inbound::Param { name, value } = inbound
+            && messages::param_name_is(&name, messages::HOVER_THRUST_PARAM)
+            && self.map.is_none()
+        {
+            let map = ThrustMap {
+                hover_thrust: f64::from(value),
+                g: G,
+            };
+            let t = self.clock.now(wall).unwrap_or(0.0);
+            match map.validate() {
+                Ok(()) => {
+                    self.map = Some(map);
+                    self.event(
+                        t,
+                        format!("PX4: {} = {value}", messages::HOVER_THRUST_PARAM),
+                    );
+                }
+                Err(e) => {
+                    self.failure = Some(format!(
+                        "PX4's {} = {value} cannot be used ({e}); calibrate it (hover, read \
+                         the hover-thrust estimate) or give the hover thrust",
+                        messages::HOVER_THRUST_PARAM
+                    ));
+                }
+            }
+            return;
+        }
+        if let Some(s) = self.input.on_inbound(&inbound) {
+            self.clock.set(s.t, wall);
+            self.state = Some(s);
+            self.last_odometry_t = Some(s.t);
+            let now = self.clock.now(wall).unwrap_or(s.t);
+            // Mean delay of the states over the least delayed one (~1 s memory).
+            self.link_delay += 0.02 * ((now - s.t).clamp(0.0, MAX_PREDICTION_S) - self.link_delay);
+            if self.map.is_some() {
+                let session = self
+                    .session
+                    .get_or_insert_with(|| Session::new(self.cfg.link, now));
+                // The session's odometry clock: only accepted (newer) states count.
+                session.on_inbound(&inbound_odometry(), now);
+            }
+            self.log_state(&s);
+            return;
+        }
+        if matches!(inbound, Inbound::Odometry(_)) {
+            return;
+        }
+        if let (Some(session), Some(now)) = (self.session.as_mut(), self.clock.now(wall)) {
+            let before = (session.px4_mode(), session.armed());
+            session.on_inbound(&inbound, now);
+            let after = (session.px4_mode(), session.armed());
+            self.was_armed |= session.armed();
+            if before != after {
+                let what = format!(
+                    "PX4: {}, {}",
+                    after.0.map_or("?".to_string(), mode_name),
+                    if after.1 { "armed" } else { "disarmed" }
+                );
+                self.event(now, what);
+            }
+        }
+    }
+
+    fn log_state(&mut self, s: &State) {
+        let Some(f) = self.flight.as_mut() else {
+            return;
+        };
+        let t = s.t - f.t0;
+        let phase = f.mission.phase();
+        if phase == MissionPhase::Flip {
+            f.flip_started = true;
+        }
+        if let Some(prev) = f.last_logged
+            && f.flip_started
+        {
+            // Trapezoidal integral of the pitch rate between states.
+            f.pitch_turned += 0.5 * (prev.w.y + s.w.y) * (s.t - prev.t);
+        }
+        let height = s.p.z - f.home.z;
+        let on_ground = height < GROUND_HEIGHT_M && s.v.norm() < GROUND_SPEED_M_S;
+        f.airborne |= height > 0.3;
+        if on_ground && !f.on_ground && f.airborne {
+            f.touchdown = Some(Touchdown {
+                t,
+                vertical_speed: f.last_logged.map_or(s.v.z, |p| p.v.z.min(s.v.z)),
+                p: s.p,
+            });
+        }
+        f.on_ground = on_ground;
+        f.last_logged = Some(*s);
+        let r = f.mission.reference(t);
+        let truth = QuadState {
+            p: s.p,
+            v: s.v,
+            q: s.q,
+            w: s.w,
+            omega: [0.0; 4],
+        };
+        f.samples.push(Sample {
+            phase: phase.index(),
+            failsafe: !self.failsafes.is_empty(),
+            pose_valid: true,
+            x_ref: r.p.x,
+            y_ref: r.p.y,
+            z_ref: r.p.z,
+            pitch_turned: f.pitch_turned,
+            wx_cmd: f.cmd.rates.x,
+            wy_cmd: f.cmd.rates.y,
+            wz_cmd: f.cmd.rates.z,
+            wy_ref: r.rate.y,
+            thrust_cmd: f.cmd.thrust_c,
+            ..Sample::at(t, &truth, [0.0; 4], f.pending_stats.take())
+        });
+    }
+
+    /// One step of the loop at wall time `wall` [s]: the messages to send now.
+    pub fn poll(&mut self, wall: f64) -> Vec<MavMessage> {
+        let mut out = Vec::new();
+        if self.map.is_none() && self.failure.is_none() && self.clock.started() {
+            self.ask_hover_thrust(wall, &mut out);
+            return out;
+        }
+        let (Some(now), Some(session)) = (self.clock.now(wall), self.session.as_mut()) else {
+            return out;
+        };
+        if self.abort {
+            session.abort();
+        }
+        let tick = session.tick(now);
+        out.extend(tick.send);
+        let phase = session.phase();
+        if let Some(f) = tick.failsafe {
+            self.failsafes.push((f, now));
+            let what = format!("failsafe: {f:?} -> {}", failsafe_mode(f));
+            self.event(now, what);
+        }
+        if tick.mpc_in_control && self.flight.is_none() {
+            self.start_flight(now);
+        }
+        let active = self.flight.is_some() && matches!(phase, Phase::Flying | Phase::Failsafe(_));
+        if active {
+            self.control(now, wall);
+        }
+        if now + 1e-9 >= self.next_setpoint {
+            let period = 1.0 / self.cfg.setpoint_rate;
+            self.next_setpoint = if self.next_setpoint + period < now {
+                now + period
+            } else {
+                self.next_setpoint + period
+            };
+            let sp = match (&self.flight, active, &self.map) {
+                (Some(f), true, Some(map)) => {
+                    let s = make_setpoint(
+                        f.cmd.thrust_c,
+                        &f.cmd.rates,
+                        map,
+                        &self.cfg.limits,
+                        self.last_setpoint.as_ref(),
+                    );
+                    self.clamped += u64::from(s.clamped);
+                    self.replaced += u64::from(s.replaced_non_finite);
+                    s.setpoint
+                }
+                _ => Px4Setpoint {
+                    rates_frd: [0.0; 3],
+                    thrust: 0.0,
+                },
+            };
+            self.last_setpoint = Some(sp);
+            out.push(messages::set_attitude_target(
+                sp.rates_frd,
+                sp.thrust,
+                (now * 1e3) as u32,
+            ));
+            self.setpoints += 1;
+            if let Some(w) = self.last_setpoint_wall {
+                self.setpoint_periods.push(wall - w);
+            }
+            self.last_setpoint_wall = Some(wall);
+        }
+        if self.finished() && self.finished_at.is_none() {
+            self.finished_at = Some(now);
+            let what = match self.session.as_ref().map(Session::phase) {
+                Some(Phase::Failed(e)) => format!("session failed: {e}"),
+                _ => "done: PX4 disarmed".to_string(),
+            };
+            self.event(now, what);
+        }
+        out
+    }
+
+    /// Asks PX4 for its hover thrust once a second; gives up after five tries.
+    fn ask_hover_thrust(&mut self, wall: f64, out: &mut Vec<MavMessage>) {
+        const TRIES: u32 = 5;
+        if self.last_param_request.is_some_and(|t| wall - t < 1.0) {
+            return;
+        }
+        if self.param_requests >= TRIES {
+            self.failure = Some(format!(
+                "PX4 did not answer the request for {} ({TRIES} tries); give the hover \
+                 thrust (normalized thrust of a hover, 0..1) instead",
+                messages::HOVER_THRUST_PARAM
+            ));
+            return;
+        }
+        self.param_requests += 1;
+        self.last_param_request = Some(wall);
+        out.push(messages::param_request_read(messages::HOVER_THRUST_PARAM));
+    }
+
+    /// Why the loop could not fly, if it could not start (no hover thrust).
+    pub fn failure(&self) -> Option<&str> {
+        self.failure.as_deref()
+    }
+
+    /// The thrust map in use (given, or read from PX4).
+    pub fn thrust_map(&self) -> Option<ThrustMap> {
+        self.map
+    }
+
+    fn start_flight(&mut self, now: f64) {
+        let Some(s) = self.state else {
+            return;
+        };
+        let mut m = self.cfg.mission.clone();
+        let shift = s.p - m.home;
+        m.home += shift;
+        m.takeoff_point += shift;
+        m.rally_point += shift;
+        // Stale odometry is the session's failsafe (PX4's return mode), not the mission's.
+        m.pose_timeout = f64::INFINITY;
+        self.flight = Some(Flight {
+            t0: now,
+            home: s.p,
+            mission: Mission::new(m),
+            ctrl: NmpcController::new(),
+            next_outer: now,
+            cmd: InnerCommand::default(),
+            samples: Vec::new(),
+            pitch_turned: 0.0,
+            flip_started: false,
+            last_logged: None,
+            touchdown: None,
+            pending_stats: None,
+            on_ground: true,
+            airborne: false,
+            history: std::collections::VecDeque::new(),
+        });
+        self.event(now, "flying: mission started".to_string());
+    }
+
+    fn control(&mut self, now: f64, wall: f64) {
+        let (Some(f), Some(s)) = (self.flight.as_mut(), self.state) else {
+            return;
+        };
+        if now + 1e-9 < f.next_outer {
+            return;
+        }
+        let period = f.ctrl.period();
+        f.next_outer = if f.next_outer + period < now {
+            now + period
+        } else {
+            f.next_outer + period
+        };
+        // The setpoint computed now acts a link delay later: solve for that instant, from
+        // the state brought forward to it.
+        let acts_at = now + self.link_delay;
+        let s = if self.cfg.predict {
+            predict(&s, f.history.make_contiguous(), acts_at)
+        } else {
+            s
+        };
+        let t = acts_at - f.t0;
+        let est = Estimate {
+            t,
+            p: s.p,
+            v: s.v,
+            q: s.q,
+            w: s.w,
+            pose_valid: true,
+        };
+        let before = f.mission.phase();
+        let phase = f.mission.update(&MissionInput {
+            t,
+            p: s.p,
+            v: s.v,
+            pose_valid: true,
+            on_ground: f.on_ground,
+        });
+        if phase == MissionPhase::Landed {
+            f.cmd = InnerCommand::default();
+        } else {
+            let stats = f.ctrl.outer(t, &est, &f.mission);
+            f.cmd = f.ctrl.inner(t, &est, &f.mission);
+            // The setpoint acts when it reaches PX4: a link delay later (taken to be the
+            // mean delay of the states, relative to the least delayed one).
+            f.history.push_back((now + self.link_delay, f.cmd));
+            while f
+                .history
+                .get(1)
+                .is_some_and(|(t1, _)| now - t1 > MAX_PREDICTION_S)
+            {
+                f.history.pop_front();
+            }
+            self.fallbacks += u64::from(stats.fallback);
+            self.solver_us.push(stats.solver_us);
+            f.pending_stats = Some(stats);
+            if let Some(session) = self.session.as_mut() {
+                session.on_solver(!stats.fallback);
+            }
+            if let Some(w) = self.last_solve_wall {
+                self.solver_periods.push(wall - w);
+            }
+            self.last_solve_wall = Some(wall);
+        }
+        if phase != before {
+            let what = format!("mission: {}", phase.name());
+            self.event(now, what);
+            if phase == MissionPhase::Landed
+                && let Some(session) = self.session.as_mut()
+            {
+                session.finish();
+            }
+        }
+    }
+
+    /// The flight's figures and the mission's verdict on the telemetry.
+    pub fn report(&self) -> FlightReport {
+        let summary = self.flight.as_ref().map(|f| {
+            let mut mission = f.mission.config().clone();
+            mission.pose_timeout = MissionConfig::flip().pose_timeout;
+            let lost = self
+                .failsafes
+                .iter()
+                .find(|(k, _)| *k == Failsafe::OdometryLost)
+                .map(|(_, t)| *t);
+            let landed = matches!(self.session.as_ref().map(Session::phase), Some(Phase::Done))
+                || (self.finished() && f.touchdown.is_some());
+            let res = TrialResult {
+                config: SimConfig::new(mission, mpc_sim::controller::ControllerKind::Nmpc),
+                samples: f.samples.clone(),
+                transitions: f.mission.transitions().to_vec(),
+                outcome: if landed {
+                    Outcome::Landed
+                } else {
+                    Outcome::Timeout
+                },
+                touchdown: f.touchdown,
+                // The pose was lost when the last state before the failsafe came.
+                pose_lost_at: lost.map(|t| t - self.cfg.link.odometry_timeout - f.t0),
+                failsafe_at: self.failsafes.first().map(|(_, t)| t - f.t0),
+            };
+            report::summarize(&res)
+        });
+        FlightReport {
+            summary,
+            session: match (self.session.as_ref().map(Session::phase), &self.failure) {
+                (_, Some(f)) => format!("failed: {f}"),
+                (None, None) => "no state from PX4".to_string(),
+                (Some(Phase::Failed(e)), None) => format!("failed: {e}"),
+                (Some(p), None) => format!("{p:?}"),
+            },
+            failsafes: self
+                .failsafes
+                .iter()
+                .map(|(f, t)| (format!("{f:?}"), *t))
+                .collect(),
+            states: self.input.accepted,
+            states_dropped: self.input.dropped,
+            setpoints: self.setpoints,
+            setpoints_clamped: self.clamped,
+            setpoints_replaced: self.replaced,
+            setpoint_period: PeriodStats::of(&self.setpoint_periods),
+            solver_period: PeriodStats::of(&self.solver_periods),
+            solver_us: report::TimeStats::of(self.solver_us.iter().copied()),
+            fallbacks: self.fallbacks,
+        }
+    }
+
+    /// The flight's log (telemetry rows, mission time), for the CSV and the plots.
+    pub fn samples(&self) -> &[Sample] {
+        self.flight.as_ref().map_or(&[], |f| &f.samples)
+    }
+}
+
+fn inbound_odometry() -> Inbound {
+    Inbound::Odometry(messages::OdometryNed {
+        time_us: 0,
+        position: [0.0; 3],
+        velocity: [0.0; 3],
+        q: [1.0, 0.0, 0.0, 0.0],
+        rates: [0.0; 3],
+    })
+}
+
+fn mode_name(m: Px4Mode) -> String {
+    match m {
+        Px4Mode::Offboard => "OFFBOARD".to_string(),
+        Px4Mode::Land => "AUTO.LAND".to_string(),
+        Px4Mode::Return => "AUTO.RTL".to_string(),
+        Px4Mode::Position => "POSCTL".to_string(),
+        Px4Mode::Other(main, sub) => format!("mode {main}.{sub}"),
+    }
+}
+
+fn failsafe_mode(f: Failsafe) -> &'static str {
+    match f {
+        Failsafe::Abort => "AUTO.LAND",
+        Failsafe::Px4LeftOffboard => "PX4's own mode",
+        Failsafe::OdometryLost | Failsafe::SolverFailures => "AUTO.RTL",
+    }
+}
+
+/// Runs `pilot` on `link` in real time, the wall clock being the time since `epoch` (the
+/// same for every call on one pilot), until it has finished, the wall clock reads `until`
+/// seconds, or `stop` is set: then it aborts (AUTO.LAND) and goes on until PX4 has landed
+/// and disarmed (or `until`); with no state from PX4 yet it returns at once. Polls every
+/// half millisecond. Call it again with a later `until` to go on (e.g. to print progress).
+pub fn run(link: &Link, pilot: &mut Pilot, epoch: Instant, until: f64, stop: &AtomicBool) {
+    loop {
+        let wall = epoch.elapsed().as_secs_f64();
+        if wall >= until || pilot.finished() {
+            return;
+        }
+        if stop.load(Ordering::Relaxed) {
+            if pilot.session().is_none() {
+                return;
+            }
+            pilot.abort();
+        }
+        while let Some((h, m)) = link.try_recv() {
+            pilot.on_message(&h, &m, epoch.elapsed().as_secs_f64());
+        }
+        for m in pilot.poll(epoch.elapsed().as_secs_f64()) {
+            let _ = link.send(&m);
+        }
+        std::thread::sleep(Duration::from_micros(500));
+    }
+}

@@ -1,0 +1,271 @@
+//! The controller loop ([`firmware_shim::pilot`]) flying the generated NMPC through the
+//! simulated PX4 over loopback UDP, in real time: the flip mission end to end, through a
+//! lossy relay (loss, duplication, reordering, jitter), and with an odometry blackout while
+//! inverted (PX4's return mode commanded, the vehicle recovers and lands).
+//!
+//! The three flights run in parallel (25 to 50 s each); each has its own ports. With
+//! `FLY_TEST_CSV=DIR` set, each writes its telemetry log to `DIR/<name>.csv`.
+
+use std::net::SocketAddr;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use firmware_shim::frames::quat_from_mavlink;
+use firmware_shim::link::{Failsafe, Phase};
+use firmware_shim::messages;
+use firmware_shim::pilot::{self, FlightReport, Pilot, PilotConfig};
+use firmware_shim::relay::{Direction, Relay, RelayConfig, RelayHooks, RelayStats};
+use firmware_shim::transport::Link;
+use firmware_shim::vehicle::{SimVehicle, VehicleConfig, serve};
+use mavlink::dialects::common::{MavCmd, MavMessage};
+use mpc_sim::mission::MissionConfig;
+
+fn free_port() -> u16 {
+    let s = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    s.local_addr().unwrap().port()
+}
+
+struct Flown {
+    pilot: Pilot,
+    vehicle: SimVehicle,
+    relay: Option<RelayStats>,
+}
+
+/// Flies `cfg` against a simulated PX4 (seed `seed`), through a relay with `faults` and
+/// `hooks` if given. The hover thrust is read from PX4's MPC_THR_HOVER unless `cfg` has it.
+fn fly(cfg: PilotConfig, seed: u64, relay: Option<(RelayConfig, RelayHooks)>) -> Flown {
+    let shim_port = free_port();
+    let shim_addr: SocketAddr = format!("127.0.0.1:{shim_port}").parse().unwrap();
+    let relay = relay.map(|(c, h)| {
+        Relay::start_with_hooks("127.0.0.1:0".parse().unwrap(), shim_addr, c, h).unwrap()
+    });
+    let vehicle_target = relay.as_ref().map_or(shim_addr, Relay::listen_addr);
+    let stop = AtomicBool::new(false);
+    let vehicle = SimVehicle::new(VehicleConfig {
+        seed,
+        ..VehicleConfig::default()
+    });
+    let mut pilot = Pilot::new(cfg).unwrap();
+    let sitl_link = Link::open_as(
+        &format!("udpout:{vehicle_target}").parse().unwrap(),
+        messages::PX4_SYSTEM,
+        messages::PX4_COMPONENT,
+    )
+    .unwrap();
+    let shim = Link::open(&format!("udpin:{shim_addr}").parse().unwrap(), 1).unwrap();
+    let vehicle = std::thread::scope(|s| {
+        let sitl = s.spawn(|| {
+            let mut v = vehicle;
+            serve(&sitl_link, &mut v, 90.0, &stop);
+            v
+        });
+        pilot::run(
+            &shim,
+            &mut pilot,
+            Instant::now(),
+            80.0,
+            &AtomicBool::new(false),
+        );
+        stop.store(true, Ordering::Relaxed);
+        sitl.join().unwrap()
+    });
+    Flown {
+        pilot,
+        vehicle,
+        relay: relay.map(Relay::stop),
+    }
+}
+
+fn show(name: &str, f: &Flown) -> FlightReport {
+    for e in f.pilot.events() {
+        eprintln!("[{name}] {:8.3}  {}", e.t, e.what);
+    }
+    for line in f.vehicle.record().summary_lines() {
+        eprintln!("[{name}] sitl: {line}");
+    }
+    let r = f.pilot.report();
+    if let Ok(dir) = std::env::var("FLY_TEST_CSV") {
+        let path = std::path::Path::new(&dir).join(format!("{name}.csv"));
+        mpc_sim::plot::write_csv(&path, f.pilot.samples()).unwrap();
+    }
+    eprintln!(
+        "[{name}] states {} (dropped {}), setpoints {}, setpoint period p99 {:.2} ms, \
+         solver period p99 {:.2} ms",
+        r.states, r.states_dropped, r.setpoints, r.setpoint_period.p99_ms, r.solver_period.p99_ms
+    );
+    if let Some(s) = &f.relay {
+        eprintln!(
+            "[{name}] relay: to the shim {:?}\n[{name}] relay: to PX4 {:?}",
+            s.vehicle_to_companion, s.companion_to_vehicle
+        );
+    }
+    r
+}
+
+/// The simulator's criteria on the telemetry (flip turned, peak rate, altitude, recovery,
+/// touchdown), and the truth: no crash, one full turn flown in OFFBOARD, a soft touchdown
+/// near home, disarmed.
+fn assert_flip_flown(name: &str, f: &Flown) {
+    let report = show(name, f);
+    let summary = report.summary.expect("the mission started");
+    assert!(summary.success, "[{name}] {:?}", summary.failures);
+    assert!(
+        report.failsafes.is_empty(),
+        "[{name}] {:?}",
+        report.failsafes
+    );
+    assert_eq!(f.pilot.session().map(|s| s.phase()), Some(Phase::Done));
+    let r = f.vehicle.record();
+    assert!(r.crashed.is_none(), "[{name}] {:?}", r.crashed);
+    // One full turn: the net rotation of a flight that starts and ends level is a whole
+    // number of turns (up to the small pitch angles of flight).
+    let turns = r.offboard_pitch_rotation / (2.0 * std::f64::consts::PI);
+    assert!((turns - 1.0).abs() < 0.05, "[{name}] turned {turns} turns");
+    let td = r.touchdowns.last().expect("landed");
+    assert!(td.vertical_speed < 0.6, "[{name}] {}", td.vertical_speed);
+    assert!(td.position.xy().norm() < 0.25, "[{name}] {:?}", td.position);
+    assert!(!f.vehicle.commander().armed());
+}
+
+#[test]
+fn the_flip_mission_flies_end_to_end_over_loopback() {
+    // The hover thrust comes from PX4 (MPC_THR_HOVER).
+    let f = fly(PilotConfig::new(MissionConfig::flip()), 0, None);
+    assert_eq!(
+        f.pilot.thrust_map().map(|m| m.hover_thrust as f32),
+        Some(f.vehicle.thrust_map().hover_thrust as f32)
+    );
+    assert_flip_flown("clean", &f);
+    let r = f.pilot.report();
+    assert_eq!(r.states_dropped, 0);
+    assert_eq!(r.fallbacks, 0);
+}
+
+#[test]
+fn the_flip_mission_survives_loss_duplication_reordering_and_jitter() {
+    let faults = RelayConfig {
+        loss: 0.2,
+        duplicate: 0.1,
+        jitter_ms: (0.0, 30.0),
+        seed: 11,
+    };
+    let f = fly(
+        PilotConfig::new(MissionConfig::flip()),
+        1,
+        Some((faults, RelayHooks::new())),
+    );
+    assert_flip_flown("lossy", &f);
+    let stats = f.relay.as_ref().unwrap();
+    for d in [Direction::VehicleToCompanion, Direction::CompanionToVehicle] {
+        let s = stats.direction(d);
+        let lost = s.dropped as f64 / s.received as f64;
+        assert!((0.15..0.25).contains(&lost), "{d}: lost {lost}");
+        assert!(s.duplicated > 0 && s.reordered > 0, "{d}: {s:?}");
+    }
+    // Overtaken and duplicated states were seen and dropped, not flown on.
+    assert!(f.pilot.report().states_dropped > 0);
+}
+
+/// Whether an ODOMETRY shows the vehicle upside down (body z up).
+fn inverted(m: &MavMessage) -> bool {
+    match m {
+        MavMessage::ODOMETRY(o) => {
+            quat_from_mavlink(o.q).is_some_and(|q| (q * nalgebra::Vector3::z()).z < 0.0)
+        }
+        _ => false,
+    }
+}
+
+#[test]
+fn an_odometry_blackout_while_inverted_commands_return_mode_in_time() {
+    const BLACKOUT: Duration = Duration::from_millis(300);
+    // Every state message (ODOMETRY, LOCAL_POSITION_NED, ATTITUDE_QUATERNION) to the shim
+    // is dropped for 300 ms from the first ODOMETRY that shows the vehicle inverted.
+    let mut since: Option<Duration> = None;
+    let hooks = RelayHooks::new()
+        .with_filter(move |d, m, t| {
+            let state = matches!(
+                m,
+                MavMessage::ODOMETRY(_)
+                    | MavMessage::LOCAL_POSITION_NED(_)
+                    | MavMessage::ATTITUDE_QUATERNION(_)
+            );
+            if d != Direction::VehicleToCompanion || !state {
+                return false;
+            }
+            if since.is_none() && inverted(m) {
+                since = Some(t);
+            }
+            since.is_some_and(|s| t >= s && t < s + BLACKOUT)
+        })
+        .with_watch(|d, m| {
+            d == Direction::VehicleToCompanion && matches!(m, MavMessage::ODOMETRY(_))
+                || matches!(m, MavMessage::COMMAND_LONG(c) if c.command == MavCmd::MAV_CMD_DO_SET_MODE)
+        });
+    let f = fly(
+        PilotConfig::new(MissionConfig::flip()),
+        2,
+        Some((RelayConfig::default(), hooks)),
+    );
+    let report = show("blackout", &f);
+    let stats = f.relay.as_ref().unwrap();
+    let (first_drop, last_drop) = stats.filter_drop_span().expect("the vehicle was inverted");
+    // The last ODOMETRY delivered before the blackout, and the first return-mode command.
+    let last_odometry = stats
+        .watched
+        .iter()
+        .filter(|(d, t, m)| {
+            *d == Direction::VehicleToCompanion
+                && matches!(m, MavMessage::ODOMETRY(_))
+                && *t < first_drop
+        })
+        .map(|(_, t, _)| *t)
+        .next_back()
+        .unwrap();
+    let rtl = stats
+        .watched
+        .iter()
+        .find(|(d, _, m)| {
+            *d == Direction::CompanionToVehicle
+                && matches!(m, MavMessage::COMMAND_LONG(c) if c.param2 == 4.0 && c.param3 == 5.0)
+        })
+        .map(|(_, t, _)| *t)
+        .expect("AUTO.RTL commanded");
+    let limit = f.pilot.config().link.odometry_timeout;
+    let after_limit = (rtl - last_odometry).as_secs_f64() - limit;
+    eprintln!(
+        "[blackout] last odometry {:.3} s, blackout {:.3}..{:.3} s, AUTO.RTL at {:.3} s: \
+         {:.1} ms after the staleness limit",
+        last_odometry.as_secs_f64(),
+        first_drop.as_secs_f64(),
+        last_drop.as_secs_f64(),
+        rtl.as_secs_f64(),
+        after_limit * 1e3
+    );
+    assert!(rtl < first_drop + BLACKOUT, "commanded inside the blackout");
+    assert!(after_limit >= 0.0, "not before the limit: {after_limit}");
+    assert!(
+        after_limit <= 0.150,
+        "{:.1} ms after the limit",
+        after_limit * 1e3
+    );
+    assert_eq!(
+        report.failsafes.first().map(|(f, _)| f.as_str()),
+        Some(format!("{:?}", Failsafe::OdometryLost).as_str())
+    );
+    // PX4's return mode brought the vehicle home from upside down and landed it.
+    let r = f.vehicle.record();
+    assert!(r.crashed.is_none(), "{:?}", r.crashed);
+    let rtl_mode = r
+        .mode_changes
+        .iter()
+        .find(|m| m.to == messages::Px4Mode::Return)
+        .expect("PX4 entered AUTO.RTL");
+    assert!(
+        !rtl_mode.failsafe,
+        "commanded, not PX4's offboard-loss failsafe"
+    );
+    let td = r.touchdowns.last().expect("landed");
+    assert!(td.position.xy().norm() < 0.5, "{:?}", td.position);
+    assert!(!f.vehicle.commander().armed());
+}
