@@ -7,6 +7,7 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 
 mod bench;
+mod fly;
 mod sim;
 mod throw;
 use mpc_dsl::lang::{ParseOptions, parse};
@@ -40,6 +41,80 @@ enum Command {
     /// Run the QR-bench closed loop (the peers' benchmark) with a generated solver; print
     /// latency per phase, QP iterations and the final error; write the trajectory CSV.
     Bench(BenchArgs),
+    /// Fly a mission through PX4 (a vehicle, PX4 SITL or `mpcc sitl`) over MAVLink with the
+    /// generated NMPC: OFFBOARD body rates and thrust, with the failsafes; print a summary,
+    /// write a CSV log and PNG plots of the telemetry.
+    Fly(FlyArgs),
+    /// A simulated PX4 vehicle on a MAVLink link (PX4's offboard rules, messages and frames)
+    /// for `mpcc fly` to fly against.
+    Sitl(SitlArgs),
+}
+
+#[derive(clap::Args)]
+struct FlyArgs {
+    /// The link to PX4: udpin:HOST:PORT (listen, answer the sender; PX4 SITL's offboard link
+    /// is udpin:127.0.0.1:14540), udpout:HOST:PORT, or serial:DEVICE:BAUD.
+    #[arg(long)]
+    connect: String,
+    /// Mission: flip (the paper's), hover or step.
+    #[arg(long, default_value = "flip")]
+    mission: String,
+    /// PX4's normalized hover thrust (0..1) for the thrust mapping (default: read PX4's
+    /// MPC_THR_HOVER).
+    #[arg(long, value_name = "THRUST")]
+    hover_thrust: Option<f64>,
+    /// Setpoint rate [Hz] (25..250; the solver runs at its model's 20 Hz).
+    #[arg(long, default_value_t = 100.0, value_name = "HZ")]
+    rate: f64,
+    /// Odometry older than this commands PX4's return mode [s].
+    #[arg(long, default_value_t = 0.1, value_name = "S")]
+    odometry_timeout: f64,
+    /// The hover mission's hold [s] (default 5).
+    #[arg(long, value_name = "S")]
+    hover_time: Option<f64>,
+    /// Rally point, relative to where the vehicle starts (ENU) [m] (default 4,0,2).
+    #[arg(long, value_name = "X,Y,Z")]
+    rally: Option<String>,
+    /// Take-off height [m] (default 2).
+    #[arg(long, value_name = "M")]
+    altitude: Option<f64>,
+    /// Pitch-rate reference of the flip [rad/s] (default 5*pi).
+    #[arg(long, value_name = "RAD_S")]
+    flip_rate: Option<f64>,
+    /// Give up (and land) after this long [s].
+    #[arg(long, default_value_t = 180.0, value_name = "S")]
+    timeout: f64,
+    /// Output directory of the CSV log and the plots.
+    #[arg(long, default_value = "fly-out")]
+    out: PathBuf,
+    /// Write no CSV or plots.
+    #[arg(long)]
+    no_plots: bool,
+    /// Print the report as one JSON object on stdout (and nothing else).
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(clap::Args)]
+struct SitlArgs {
+    /// Where to send (as PX4 SITL: udpout:127.0.0.1:14540), or udpin:HOST:PORT.
+    #[arg(long, default_value = "udpout:127.0.0.1:14540")]
+    connect: String,
+    /// Stop after this long [s] (default: at Ctrl-C).
+    #[arg(long, value_name = "S")]
+    duration: Option<f64>,
+    /// Stop once the vehicle has flown and is disarmed again.
+    #[arg(long)]
+    exit_after_flight: bool,
+    /// Seed of the estimation noise.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Odometry without noise or latency.
+    #[arg(long)]
+    perfect_sensing: bool,
+    /// Print the summary as one JSON object on stdout.
+    #[arg(long)]
+    json: bool,
 }
 
 #[derive(clap::Args)]
@@ -171,6 +246,8 @@ fn main() -> ExitCode {
     match cli.command {
         Command::Sim(args) => sim::run(&args),
         Command::Bench(args) => bench::run(&args),
+        Command::Fly(args) => fly::fly(&args),
+        Command::Sitl(args) => fly::sitl(&args),
         Command::Check { file, variant } => check(&file, variant),
         Command::Build(args) => build(&args),
     }

@@ -72,10 +72,16 @@ pub(crate) fn check_solver(controller: &str, quiet: bool) -> Result<(), String> 
     Ok(())
 }
 
-/// The mission configuration of the arguments.
-fn mission_config(args: &SimArgs, kind: MissionKind) -> Result<MissionConfig, String> {
+/// The mission configuration of `kind` with the command line's `--rally`, `--altitude` and
+/// `--flip-rate` (shared by `mpcc sim` and `mpcc fly`).
+pub(crate) fn mission_config(
+    kind: MissionKind,
+    rally: Option<&str>,
+    altitude: Option<f64>,
+    flip_rate: Option<f64>,
+) -> Result<MissionConfig, String> {
     let mut m = MissionConfig::for_kind(kind);
-    if let Some(r) = &args.rally {
+    if let Some(r) = rally {
         let v: Vec<f64> = r
             .split(',')
             .map(|s| s.trim().parse::<f64>())
@@ -93,16 +99,16 @@ fn mission_config(args: &SimArgs, kind: MissionKind) -> Result<MissionConfig, St
             _ => return Err(format!("--rally {r}: give three finite numbers X,Y,Z")),
         }
     }
-    if let Some(a) = args.altitude {
+    if let Some(a) = altitude {
         if !(a.is_finite() && a >= 0.5) {
             return Err(format!("--altitude {a}: give a height of at least 0.5 m"));
         }
         m.takeoff_point.z = m.home.z + a;
-        if args.rally.is_none() {
+        if rally.is_none() {
             m.rally_point.z = m.home.z + a;
         }
     }
-    if let Some(w) = args.flip_rate {
+    if let Some(w) = flip_rate {
         if !(w.is_finite() && w > 1.0 && w <= 20.0) {
             return Err(format!(
                 "--flip-rate {w}: give a pitch rate in (1, 20] rad/s (the NMPC's rate bound is 20)"
@@ -175,14 +181,16 @@ pub(crate) fn run(args: &SimArgs) -> ExitCode {
     if args.mission == "flip-throw" {
         return crate::throw::run(args);
     }
-    let (_, controller, mission_cfg) =
-        match parse(args).and_then(|(m, c)| Ok((m, c, mission_config(args, m)?))) {
-            Ok(v) => v,
-            Err(e) => {
-                eprintln!("error: {e}");
-                return ExitCode::from(2);
-            }
-        };
+    let (_, controller, mission_cfg) = match parse(args).and_then(|(m, c)| {
+        let cfg = mission_config(m, args.rally.as_deref(), args.altitude, args.flip_rate)?;
+        Ok((m, c, cfg))
+    }) {
+        Ok(v) => v,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::from(2);
+        }
+    };
     if let Err(e) = check_solver(controller.name(), args.json) {
         eprintln!("error: {e}");
         return ExitCode::FAILURE;

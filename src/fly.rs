@@ -1,0 +1,368 @@
+//! `mpcc fly`: fly a mission through PX4 over MAVLink with the generated NMPC, and
+//! `mpcc sitl`: the simulated PX4 vehicle to fly it against.
+
+use std::path::Path;
+use std::process::ExitCode;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
+
+use firmware_shim::messages;
+use firmware_shim::pilot::{self, Pilot, PilotConfig};
+use firmware_shim::setpoint::ThrustMap;
+use firmware_shim::transport::{Address, Link};
+use firmware_shim::vehicle::{SimVehicle, VehicleConfig, mode_name};
+use mpc_sim::estimator::EstimatorConfig;
+use mpc_sim::mission::{G, MissionKind, Phase};
+use mpc_sim::report;
+
+use crate::{FlyArgs, SitlArgs};
+
+/// Ctrl-C sets the returned flag (once per process; a second handler cannot be installed).
+fn interrupt_flag() -> Arc<AtomicBool> {
+    let stop = Arc::new(AtomicBool::new(false));
+    let s = Arc::clone(&stop);
+    if let Err(e) = ctrlc::set_handler(move || s.store(true, Ordering::Relaxed)) {
+        eprintln!("warning: Ctrl-C will not stop cleanly: {e}");
+    }
+    stop
+}
+
+fn open(address: &str, as_px4: bool) -> Result<Link, String> {
+    let addr: Address = address
+        .parse()
+        .map_err(|e| format!("--connect {address}: {e}"))?;
+    let link = if as_px4 {
+        Link::open_as(&addr, messages::PX4_SYSTEM, messages::PX4_COMPONENT)
+    } else {
+        Link::open(&addr, messages::PX4_SYSTEM)
+    };
+    link.map_err(|e| format!("--connect {address}: {e}"))
+}
+
+fn mission_kind(name: &str) -> Result<MissionKind, String> {
+    match name {
+        "flip" => Ok(MissionKind::Flip),
+        "hover" => Ok(MissionKind::Hover),
+        "step" => Ok(MissionKind::Step),
+        "flip-throw" => Err(
+            "--mission flip-throw: the probe mission flies only in the simulator (`mpcc sim`)"
+                .to_string(),
+        ),
+        m => Err(format!("--mission {m}: unknown; use flip, hover or step")),
+    }
+}
+
+fn pilot_config(args: &FlyArgs) -> Result<PilotConfig, String> {
+    let kind = mission_kind(&args.mission)?;
+    let mut mission =
+        crate::sim::mission_config(kind, args.rally.as_deref(), args.altitude, args.flip_rate)?;
+    if let Some(h) = args.hover_time {
+        if kind != MissionKind::Hover {
+            return Err("--hover-time is a setting of --mission hover".to_string());
+        }
+        if !(h.is_finite() && (0.0..=3600.0).contains(&h)) {
+            return Err(format!("--hover-time {h}: give 0 to 3600 s"));
+        }
+        mission.hover_time = h;
+    }
+    let mut cfg = PilotConfig::new(mission);
+    if let Some(h) = args.hover_thrust {
+        let map = ThrustMap {
+            hover_thrust: h,
+            g: G,
+        };
+        map.validate()
+            .map_err(|e| format!("--hover-thrust {h}: {e}"))?;
+        cfg.thrust_map = Some(map);
+    }
+    cfg.setpoint_rate = args.rate;
+    cfg.link.odometry_timeout = args.odometry_timeout;
+    cfg.validate().map_err(|e| e.to_string())?;
+    if !(args.timeout.is_finite() && args.timeout > 0.0) {
+        return Err(format!("--timeout {}: give a time > 0 s", args.timeout));
+    }
+    Ok(cfg)
+}
+
+pub(crate) fn fly(args: &FlyArgs) -> ExitCode {
+    let cfg = match pilot_config(args) {
+        Ok(c) => c,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    if let Err(e) = crate::sim::check_solver("nmpc", args.json) {
+        eprintln!("error: {e}");
+        return ExitCode::FAILURE;
+    }
+    let link = match open(&args.connect, false) {
+        Ok(l) => l,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    let mut pilot = match Pilot::new(cfg) {
+        Ok(p) => p,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    let stop = interrupt_flag();
+    if !args.json {
+        eprintln!(
+            "fly: {} mission on {} (Ctrl-C: land); waiting for PX4's state",
+            args.mission, args.connect
+        );
+    }
+    let started = Instant::now();
+    // Print the events as they happen: run the loop in slices.
+    let mut shown = 0;
+    let mut state_seen = false;
+    loop {
+        let elapsed = started.elapsed().as_secs_f64();
+        let left = args.timeout - elapsed;
+        if left <= 0.0 || pilot.finished() {
+            break;
+        }
+        if stop.load(Ordering::Relaxed) && pilot.session().is_none() {
+            break;
+        }
+        pilot::run(
+            &link,
+            &mut pilot,
+            started,
+            (elapsed + 0.1).min(args.timeout),
+            &stop,
+        );
+        if !state_seen && pilot.state().is_none() && elapsed > 10.0 {
+            eprintln!(
+                "error: no ODOMETRY (or LOCAL_POSITION_NED + ATTITUDE_QUATERNION) from PX4 \
+                 (system 1, component 1) on {} within 10 s: is PX4 sending to this address?",
+                args.connect
+            );
+            return ExitCode::FAILURE;
+        }
+        state_seen |= pilot.state().is_some();
+        for e in pilot.events().iter().skip(shown) {
+            if !args.json {
+                eprintln!("{:9.3} s  {}", e.t, e.what);
+            }
+        }
+        shown = pilot.events().len();
+    }
+    if !pilot.finished() && pilot.session().is_some() {
+        eprintln!(
+            "error: the mission did not finish within --timeout {} s",
+            args.timeout
+        );
+    }
+    if let Some(f) = pilot.failure() {
+        eprintln!("error: {f}");
+        return ExitCode::FAILURE;
+    }
+    let rep = pilot.report();
+    if args.json {
+        match serde_json::to_string(&rep) {
+            Ok(s) => println!("{s}"),
+            Err(e) => {
+                eprintln!("error: JSON: {e}");
+                return ExitCode::FAILURE;
+            }
+        }
+    } else {
+        if let Some(s) = &rep.summary {
+            let run = report::aggregate(&args.mission, "nmpc", std::slice::from_ref(s));
+            print!("{}", report::table(&run));
+        }
+        print_link_figures(&rep);
+    }
+    if !args.no_plots
+        && !pilot.samples().is_empty()
+        && let Err(e) = write_outputs(&args.out, &args.mission, pilot.samples(), args.json)
+    {
+        eprintln!("error: {e}");
+        return ExitCode::FAILURE;
+    }
+    if rep.summary.as_ref().is_some_and(|s| s.success) && rep.failsafes.is_empty() {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::FAILURE
+    }
+}
+
+fn print_link_figures(rep: &pilot::FlightReport) {
+    let p = &rep.setpoint_period;
+    let s = &rep.solver_period;
+    println!("session: {}", rep.session);
+    for (f, t) in &rep.failsafes {
+        println!("failsafe: {f} at {t:.3} s");
+    }
+    println!(
+        "link: {} states ({} dropped: duplicate, overtaken or not finite), {} setpoints \
+         ({} clamped, {} replaced)",
+        rep.states,
+        rep.states_dropped,
+        rep.setpoints,
+        rep.setpoints_clamped,
+        rep.setpoints_replaced
+    );
+    println!(
+        "setpoint period [ms]: mean {:.2}  median {:.2}  p99 {:.2}  max {:.2}  ({} periods)",
+        p.mean_ms, p.median_ms, p.p99_ms, p.max_ms, p.count
+    );
+    println!(
+        "solver period [ms]:   mean {:.2}  median {:.2}  p99 {:.2}  max {:.2}  ({} solves, {} \
+         fallbacks; solver time mean {:.0} us, p99 {:.0} us)",
+        s.mean_ms,
+        s.median_ms,
+        s.p99_ms,
+        s.max_ms,
+        s.count,
+        rep.fallbacks,
+        rep.solver_us.mean,
+        rep.solver_us.p99
+    );
+}
+
+fn write_outputs(
+    dir: &Path,
+    mission: &str,
+    samples: &[mpc_sim::log::Sample],
+    quiet: bool,
+) -> Result<(), String> {
+    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let csv = dir.join(format!("fly_{mission}.csv"));
+    mpc_sim::plot::write_csv(&csv, samples).map_err(|e| e.to_string())?;
+    let title = format!("{mission} · mpcc fly · PX4 telemetry");
+    let names = Phase::names();
+    let plots =
+        mpc_sim::plot::write_plots(dir, &format!("fly_{mission}_"), &title, samples, &names)
+            .map_err(|e| e.to_string())?;
+    if !quiet {
+        println!(
+            "wrote {}, {}, {}, {}, {}",
+            csv.display(),
+            plots.position.display(),
+            plots.rates.display(),
+            plots.thrust.display(),
+            plots.solver_time.display()
+        );
+    }
+    Ok(())
+}
+
+pub(crate) fn sitl(args: &SitlArgs) -> ExitCode {
+    if let Some(d) = args.duration
+        && !(d.is_finite() && d > 0.0)
+    {
+        eprintln!("error: --duration {d}: give a time > 0 s");
+        return ExitCode::from(2);
+    }
+    let link = match open(&args.connect, true) {
+        Ok(l) => l,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    let mut cfg = VehicleConfig {
+        seed: args.seed,
+        ..VehicleConfig::default()
+    };
+    if args.perfect_sensing {
+        cfg.estimator = EstimatorConfig::perfect();
+    }
+    let mut vehicle = SimVehicle::new(cfg);
+    let stop = interrupt_flag();
+    if !args.json {
+        eprintln!(
+            "sitl: simulated PX4 (system 1, component 1) on {}; hover thrust (MPC_THR_HOVER) \
+             {:.4}; Ctrl-C to stop",
+            args.connect,
+            vehicle.thrust_map().hover_thrust
+        );
+    }
+    let duration = args.duration.unwrap_or(f64::INFINITY);
+    let mut shown = 0;
+    let mut disarmed_since: Option<f64> = None;
+    let json = args.json;
+    firmware_shim::vehicle::serve_with(&link, &mut vehicle, duration, &stop, |v| {
+        let r = v.record();
+        if !json {
+            for m in r.mode_changes.iter().skip(shown) {
+                eprintln!(
+                    "{:9.3} s  {} -> {}{}",
+                    m.time,
+                    mode_name(m.from),
+                    mode_name(m.to),
+                    if m.failsafe {
+                        " (offboard-loss failsafe)"
+                    } else {
+                        ""
+                    }
+                );
+            }
+        }
+        shown = r.mode_changes.len();
+        if r.crashed.is_some() {
+            return false;
+        }
+        // --exit-after-flight: flown, disarmed again, half a second later.
+        let done = r.first_liftoff.is_some() && !v.commander().armed();
+        if !done {
+            disarmed_since = None;
+            return true;
+        }
+        let since = *disarmed_since.get_or_insert(v.time());
+        !(args.exit_after_flight && v.time() - since > 0.5)
+    });
+    sitl_summary(&vehicle, args.json)
+}
+
+fn sitl_summary(vehicle: &SimVehicle, json: bool) -> ExitCode {
+    let r = vehicle.record();
+    if json {
+        let v3 = |p: &mpc_sim::nalgebra::Vector3<f64>| [p.x, p.y, p.z];
+        let v = serde_json::json!({
+            "time_s": r.time,
+            "crashed": r.crashed,
+            "crash_time_s": r.crash_time,
+            "airborne_time_s": r.airborne_time,
+            "first_liftoff_s": r.first_liftoff,
+            "max_height_m": r.max_height,
+            "offboard_pitch_rotation_rad": r.offboard_pitch_rotation,
+            "offboard_max_pitch_rate_rad_s": r.offboard_max_pitch_rate,
+            "touchdowns": r.touchdowns.iter().map(|t| serde_json::json!({
+                "time_s": t.time,
+                "vertical_speed_m_s": t.vertical_speed,
+                "position_m": v3(&t.position),
+            })).collect::<Vec<_>>(),
+            "mode_changes": r.mode_changes.iter().map(|m| serde_json::json!({
+                "time_s": m.time,
+                "from": mode_name(m.from),
+                "to": mode_name(m.to),
+                "failsafe": m.failsafe,
+            })).collect::<Vec<_>>(),
+            "armed_at_s": r.armed_at,
+            "disarmed_at_s": r.disarmed_at,
+            "armed": vehicle.commander().armed(),
+            "mode": mode_name(vehicle.commander().mode()),
+            "offboard_loss_failsafe_at_s": vehicle.commander().failsafe_at(),
+            "final_position_m": v3(&r.final_position),
+        });
+        println!("{v}");
+    } else {
+        for line in r.summary_lines() {
+            println!("sitl: {line}");
+        }
+    }
+    if r.crashed.is_some() {
+        ExitCode::FAILURE
+    } else {
+        ExitCode::SUCCESS
+    }
+}
