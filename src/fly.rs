@@ -120,33 +120,39 @@ pub(crate) fn fly(args: &FlyArgs) -> ExitCode {
     }
     let started = Instant::now();
     // Print the events as they happen: run the loop in slices.
+    // At the timeout (or Ctrl-C) the pilot lands the vehicle (AUTO.LAND) and waits at most
+    // a minute more for PX4 to disarm.
+    const LANDING_GRACE: f64 = 60.0;
     let mut shown = 0;
-    let mut state_seen = false;
+    let mut timed_out = false;
     loop {
         let elapsed = started.elapsed().as_secs_f64();
-        let left = args.timeout - elapsed;
-        if left <= 0.0 || pilot.finished() {
+        if pilot.finished() || elapsed >= args.timeout + LANDING_GRACE {
             break;
+        }
+        if elapsed >= args.timeout && !timed_out {
+            timed_out = true;
+            if pilot.session().is_none() {
+                break;
+            }
+            eprintln!("fly: --timeout {} s reached: landing", args.timeout);
+            pilot.abort();
         }
         if stop.load(Ordering::Relaxed) && pilot.session().is_none() {
             break;
         }
+        let until = if timed_out {
+            args.timeout + LANDING_GRACE
+        } else {
+            args.timeout
+        };
         pilot::run(
             &link,
             &mut pilot,
             started,
-            (elapsed + 0.1).min(args.timeout),
+            (elapsed + 0.1).min(until),
             &stop,
         );
-        if !state_seen && pilot.state().is_none() && elapsed > 10.0 {
-            eprintln!(
-                "error: no ODOMETRY (or LOCAL_POSITION_NED + ATTITUDE_QUATERNION) from PX4 \
-                 (system 1, component 1) on {} within 10 s: is PX4 sending to this address?",
-                args.connect
-            );
-            return ExitCode::FAILURE;
-        }
-        state_seen |= pilot.state().is_some();
         for e in pilot.events().iter().skip(shown) {
             if !args.json {
                 eprintln!("{:9.3} s  {}", e.t, e.what);
@@ -154,7 +160,16 @@ pub(crate) fn fly(args: &FlyArgs) -> ExitCode {
         }
         shown = pilot.events().len();
     }
-    if !pilot.finished() && pilot.session().is_some() {
+    if pilot.state().is_none() {
+        eprintln!(
+            "error: no ODOMETRY (nor LOCAL_POSITION_NED + ATTITUDE_QUATERNION) from PX4 (system \
+             1, component 1) on {} in {:.1} s: is PX4 sending to this address?",
+            args.connect,
+            started.elapsed().as_secs_f64()
+        );
+        return ExitCode::FAILURE;
+    }
+    if timed_out {
         eprintln!(
             "error: the mission did not finish within --timeout {} s",
             args.timeout
@@ -311,14 +326,15 @@ pub(crate) fn sitl(args: &SitlArgs) -> ExitCode {
         if r.crashed.is_some() {
             return false;
         }
-        // --exit-after-flight: flown, disarmed again, half a second later.
+        // --exit-after-flight: flown, disarmed again, and two heartbeats later (1 Hz) so that
+        // the controller has seen the disarm.
         let done = r.first_liftoff.is_some() && !v.commander().armed();
         if !done {
             disarmed_since = None;
             return true;
         }
         let since = *disarmed_since.get_or_insert(v.time());
-        !(args.exit_after_flight && v.time() - since > 0.5)
+        !(args.exit_after_flight && v.time() - since > 2.1)
     });
     sitl_summary(&vehicle, args.json)
 }

@@ -103,7 +103,8 @@ struct SitlArgs {
     /// Stop after this long [s] (default: at Ctrl-C).
     #[arg(long, value_name = "S")]
     duration: Option<f64>,
-    /// Stop once the vehicle has flown and is disarmed again.
+    /// Stop once the vehicle has flown and is disarmed again (2 s later: the 1 Hz HEARTBEAT
+    /// shows the disarm to the controller).
     #[arg(long)]
     exit_after_flight: bool,
     /// Seed of the estimation noise.

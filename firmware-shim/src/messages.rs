@@ -129,8 +129,8 @@ pub fn heartbeat() -> MavMessage {
     })
 }
 
-/// PX4's hover thrust parameter (normalized thrust of a hover, its hover-thrust estimator's
-/// output when `MPC_USE_HTE` is set).
+/// PX4's hover thrust parameter: the normalized thrust of a hover, as configured (PX4's
+/// hover-thrust estimator does not write it back: set it from a logged hover).
 pub const HOVER_THRUST_PARAM: &str = "MPC_THR_HOVER";
 
 /// PARAM_REQUEST_READ of the parameter `name` (at most 16 bytes) from PX4's autopilot.

@@ -1,0 +1,285 @@
+//! `mpcc fly` against `mpcc sitl`, two processes on loopback UDP, in real time: the flip
+//! mission end to end (the simulator's criteria on the telemetry, the truth from the
+//! simulated PX4), the controller process killed in flight (the simulated PX4's
+//! offboard-loss failsafe holds the vehicle), Ctrl-C (the controller lands the vehicle through
+//! PX4 and waits for the disarm), and the errors on bad input.
+
+mod common;
+
+use std::io::{BufRead, BufReader};
+use std::process::{Command, Stdio};
+use std::time::Duration;
+
+use common::{mpcc, wait_with_timeout};
+
+fn free_port() -> u16 {
+    let s = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    s.local_addr().unwrap().port()
+}
+
+fn spawn(args: &[&str]) -> std::process::Child {
+    Command::new(env!("CARGO_BIN_EXE_mpcc"))
+        .args(args)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("mpcc runs")
+}
+
+fn json(text: &str) -> serde_json::Value {
+    let line = text
+        .lines()
+        .rev()
+        .find(|l| l.starts_with('{'))
+        .unwrap_or_else(|| panic!("no JSON in\n{text}"));
+    serde_json::from_str(line).unwrap()
+}
+
+fn num(v: &serde_json::Value, key: &str) -> f64 {
+    v.get(key)
+        .and_then(serde_json::Value::as_f64)
+        .unwrap_or_else(|| panic!("{key} missing or not a number in {v}"))
+}
+
+#[test]
+fn fly_flies_the_flip_against_sitl() {
+    let port = free_port();
+    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("cli_fly_flip");
+    let _ = std::fs::remove_dir_all(&dir);
+    let mut sitl = spawn(&[
+        "sitl",
+        "--connect",
+        &format!("udpout:127.0.0.1:{port}"),
+        "--exit-after-flight",
+        "--duration",
+        "120",
+        "--json",
+    ]);
+    // The hover thrust comes from the simulated PX4's MPC_THR_HOVER.
+    let mut fly = spawn(&[
+        "fly",
+        "--connect",
+        &format!("udpin:127.0.0.1:{port}"),
+        "--mission",
+        "flip",
+        "--timeout",
+        "100",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    let f = wait_with_timeout(&mut fly, Duration::from_secs(150));
+    let s = wait_with_timeout(&mut sitl, Duration::from_secs(30));
+    assert!(
+        f.status.is_some_and(|c| c.success()),
+        "fly: {:?}\n{}\n{}\nsitl:\n{}",
+        f.status,
+        f.stdout,
+        f.stderr,
+        s.stderr
+    );
+    // The simulator's table and criteria, on the telemetry.
+    assert!(f.stdout.contains("1 of 1 trials succeeded"), "{}", f.stdout);
+    assert!(f.stdout.contains("session: Done"), "{}", f.stdout);
+    for event in [
+        "PX4: MPC_THR_HOVER",
+        "PX4: OFFBOARD, armed",
+        "mission: flip",
+        "mission: landed",
+        "done: PX4 disarmed",
+    ] {
+        assert!(f.stderr.contains(event), "no '{event}' in\n{}", f.stderr);
+    }
+    assert!(f.stdout.contains("setpoint period [ms]"), "{}", f.stdout);
+    let csv = std::fs::read_to_string(dir.join("fly_flip.csv")).unwrap();
+    assert!(csv.lines().count() > 1500, "a 100 Hz telemetry log");
+    let png = std::fs::read(dir.join("fly_flip_position.png")).unwrap();
+    assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n");
+    // The truth, from the simulated PX4.
+    assert!(s.status.is_some_and(|c| c.success()), "{}", s.stderr);
+    let truth = json(&s.stdout);
+    assert!(truth["crashed"].is_null(), "{truth}");
+    let turns = num(&truth, "offboard_pitch_rotation_rad") / std::f64::consts::TAU;
+    assert!((turns - 1.0).abs() < 0.05, "{turns} turns");
+    assert!(num(&truth, "offboard_max_pitch_rate_rad_s") > 0.9 * 5.0 * std::f64::consts::PI);
+    let td = truth["touchdowns"].as_array().unwrap();
+    let last = td.last().expect("landed");
+    assert!(num(last, "vertical_speed_m_s") < 0.6, "{last}");
+    assert_eq!(truth["armed"], false);
+    let modes: Vec<&str> = truth["mode_changes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|m| m["to"].as_str().unwrap())
+        .collect();
+    assert_eq!(modes, ["OFFBOARD", "AUTO.LAND"], "{truth}");
+}
+
+#[test]
+fn a_killed_controller_leaves_the_vehicle_to_px4s_offboard_loss_failsafe() {
+    let port = free_port();
+    let mut sitl = spawn(&[
+        "sitl",
+        "--connect",
+        &format!("udpout:127.0.0.1:{port}"),
+        "--duration",
+        "30",
+        "--json",
+    ]);
+    let mut fly = spawn(&[
+        "fly",
+        "--connect",
+        &format!("udpin:127.0.0.1:{port}"),
+        "--mission",
+        "hover",
+        "--hover-time",
+        "60",
+        "--no-plots",
+    ]);
+    // Kill the controller (SIGKILL: no chance to land) once it hovers at the take-off point.
+    let (seen, _rest) = wait_for_line(&mut fly, "mission: hold");
+    fly.kill().unwrap();
+    let _ = fly.wait();
+    assert!(
+        seen.last().is_some_and(|l| l.contains("mission: hold")),
+        "{seen:?}"
+    );
+    let s = wait_with_timeout(&mut sitl, Duration::from_secs(60));
+    assert!(s.status.is_some_and(|c| c.success()), "{}", s.stderr);
+    let truth = json(&s.stdout);
+    assert!(truth["crashed"].is_null(), "{truth}");
+    // PX4 switched to POSCTL on its own (the failsafe), is still armed and holds the
+    // vehicle in the air near the take-off point.
+    let failsafe = truth["mode_changes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|m| m["failsafe"] == true)
+        .unwrap_or_else(|| panic!("no failsafe in {truth}"));
+    assert_eq!(failsafe["from"], "OFFBOARD");
+    assert_eq!(failsafe["to"], "POSCTL");
+    assert!(num(&truth, "offboard_loss_failsafe_at_s") > 0.0);
+    assert_eq!(truth["armed"], true);
+    let p = &truth["final_position_m"];
+    let z = p[2].as_f64().unwrap();
+    assert!(z > 1.5 && z < 2.5, "holds its height: {p}");
+    assert!(
+        p[0].as_f64().unwrap().hypot(p[1].as_f64().unwrap()) < 0.5,
+        "{p}"
+    );
+}
+
+/// Reads `child`'s stderr until a line contains `what`; returns the lines read (the reader
+/// goes on draining on a thread so the child never blocks on a full pipe).
+fn wait_for_line(
+    child: &mut std::process::Child,
+    what: &str,
+) -> (Vec<String>, std::thread::JoinHandle<Vec<String>>) {
+    let stderr = BufReader::new(child.stderr.take().unwrap());
+    let mut lines = stderr.lines();
+    let mut seen = Vec::new();
+    for line in lines.by_ref() {
+        let line = line.unwrap();
+        let found = line.contains(what);
+        seen.push(line);
+        if found {
+            break;
+        }
+    }
+    let rest = std::thread::spawn(move || lines.map_while(Result::ok).collect());
+    (seen, rest)
+}
+
+#[test]
+fn ctrl_c_lands_the_vehicle_instead_of_just_exiting() {
+    let port = free_port();
+    let mut sitl = spawn(&[
+        "sitl",
+        "--connect",
+        &format!("udpout:127.0.0.1:{port}"),
+        "--exit-after-flight",
+        "--duration",
+        "60",
+        "--json",
+    ]);
+    let mut fly = spawn(&[
+        "fly",
+        "--connect",
+        &format!("udpin:127.0.0.1:{port}"),
+        "--mission",
+        "hover",
+        "--hover-time",
+        "60",
+        "--no-plots",
+    ]);
+    let (seen, rest) = wait_for_line(&mut fly, "mission: hold");
+    assert!(
+        seen.last().is_some_and(|l| l.contains("mission: hold")),
+        "{seen:?}"
+    );
+    let interrupted = Command::new("kill")
+        .args(["-INT", &fly.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(interrupted.success());
+    let f = wait_with_timeout(&mut fly, Duration::from_secs(60));
+    let rest = rest.join().unwrap().join("\n");
+    // It landed through PX4 (AUTO.LAND), waited for the disarm, and says it did not finish
+    // the mission.
+    assert_eq!(f.status.and_then(|s| s.code()), Some(1), "{rest}");
+    assert!(rest.contains("failsafe: Abort -> AUTO.LAND"), "{rest}");
+    assert!(rest.contains("done: PX4 disarmed"), "{rest}");
+    let s = wait_with_timeout(&mut sitl, Duration::from_secs(30));
+    let truth = json(&s.stdout);
+    assert!(truth["crashed"].is_null(), "{truth}");
+    assert_eq!(truth["armed"], false, "{truth}");
+    let last = truth["mode_changes"]
+        .as_array()
+        .unwrap()
+        .last()
+        .unwrap()
+        .clone();
+    assert_eq!(last["to"], "AUTO.LAND", "{truth}");
+    assert_eq!(last["failsafe"], false, "commanded, not PX4's own failsafe");
+    assert!(
+        !truth["touchdowns"].as_array().unwrap().is_empty(),
+        "{truth}"
+    );
+}
+
+#[test]
+fn fly_and_sitl_reject_bad_input_with_a_clear_message() {
+    let port = free_port().to_string();
+    let udpin = format!("udpin:127.0.0.1:{port}");
+    for (args, want) in [
+        (
+            vec!["fly", "--connect", "tcp:1.2.3.4:5"],
+            "--connect tcp:1.2.3.4:5",
+        ),
+        (
+            vec!["fly", "--connect", &udpin, "--rate", "500"],
+            "setpoint rate 500",
+        ),
+        (
+            vec!["fly", "--connect", &udpin, "--mission", "flip-throw"],
+            "only in the simulator",
+        ),
+        (
+            vec!["fly", "--connect", &udpin, "--hover-time", "3"],
+            "--hover-time is a setting of --mission hover",
+        ),
+        (
+            vec!["fly", "--connect", &udpin, "--hover-thrust", "1.5"],
+            "--hover-thrust 1.5",
+        ),
+        (vec!["sitl", "--duration", "0"], "--duration 0"),
+    ] {
+        let (code, _, err) = mpcc(&args);
+        assert_eq!(code, Some(2), "{args:?}: {err}");
+        assert!(err.contains(want), "{args:?}: want '{want}' in {err}");
+    }
+    // Nobody on the link: a timeout with the reason.
+    let (code, _, err) = mpcc(&["fly", "--connect", &udpin, "--timeout", "1"]);
+    assert_eq!(code, Some(1), "{err}");
+    assert!(err.contains("no ODOMETRY"), "{err}");
+}
