@@ -1,34 +1,32 @@
-//! `firmware-shim`: the bridge between an mpcc-generated solver and the PX4 autopilot.
+//! `firmware-shim`: the bridge between an mpcc-generated solver and the PX4 autopilot, as
+//! the paper flew it (a companion computer commanding PX4 in OFFBOARD), without ROS.
+//! `mpcc fly` and `mpcc sitl` are built on it; `docs/shim.md` is the user's guide.
 //!
-//! Work in progress (issue 9). What is here:
-//!
-//! * [`frames`]: conversions between PX4's NED world frame / FRD body frame and the models'
-//!   ENU / FLU, for positions, velocities, quaternions and body rates;
-//! * [`setpoint`]: the body-rate + collective-thrust setpoint PX4 takes, made safe (never
-//!   non-finite, always in range) and mapped to PX4's normalized thrust with a calibrated
-//!   hover-thrust parameter;
+//! * [`pilot`]: the controller loop: PX4's state in (ODOMETRY, or LOCAL_POSITION_NED +
+//!   ATTITUDE_QUATERNION), the generated NMPC flying the simulator's missions, body-rate +
+//!   thrust setpoints out, clocked by the vehicle, with latency compensation and the
+//!   session's failsafes; [`pilot::run`] drives it on a link in real time;
+//! * [`link`]: the offboard session as a state machine clocked by the caller: odometry rate,
+//!   streaming before OFFBOARD, mode and arm commands with acknowledgements, retries and
+//!   timeouts, landing at the end, and the failsafes (odometry lost, solver failures,
+//!   operator abort, PX4 leaving OFFBOARD);
 //! * [`messages`]: the MAVLink 2 (common dialect) messages of the offboard link, built and
-//!   read with the `mavlink` crate: HEARTBEAT, SET_ATTITUDE_TARGET, COMMAND_LONG (arm, mode,
-//!   land, return) and the state PX4 sends (ODOMETRY, LOCAL_POSITION_NED,
-//!   ATTITUDE_QUATERNION, EXTENDED_SYS_STATE, HEARTBEAT with PX4's custom mode);
-//! * [`link`]: the offboard session as a state machine clocked by the caller: streaming
-//!   before OFFBOARD, mode and arm commands with acknowledgements, retries and timeouts,
-//!   and the failsafes (odometry lost, solver failures, operator abort, PX4 leaving
-//!   OFFBOARD).
-//!
+//!   read with the `mavlink` crate;
+//! * [`frames`]: PX4's NED world / FRD body frames against the models' ENU / FLU, for
+//!   positions, velocities, quaternions and body rates;
+//! * [`setpoint`]: the body-rate + collective-thrust setpoint PX4 takes, made safe (never
+//!   non-finite, always in range) and mapped to PX4's normalized thrust with the vehicle's
+//!   hover thrust;
 //! * [`transport`]: the link (udpin, udpout, serial) through `mavlink::connect`, with
-//!   non-blocking reads and typed address errors.
-//!
+//!   non-blocking reads and typed address errors;
 //! * [`sitl`]: the simulated PX4's commander (PX4's offboard rules: OFFBOARD only while
 //!   setpoints stream, arming checks, the offboard-loss failsafe, automatic disarm after an
-//!   AUTO landing, double acknowledgement of mode changes), for `mpcc sitl`.
-//!
-//! * [`vehicle`]: the simulated PX4 vehicle: the commander around the simulator's plant and
-//!   rate loop, flown by the offboard setpoint or by a PX4-like position controller (hold,
-//!   land, return), sending ODOMETRY, HEARTBEAT and EXTENDED_SYS_STATE in PX4's frames.
-//!
-//! Not yet: the UDP endpoint around the vehicle (`mpcc sitl`), the controller loop that
-//! ties the session to a generated solver, `mpcc fly`.
+//!   AUTO landing, message intervals);
+//! * [`vehicle`]: the simulated PX4 vehicle (`mpcc sitl`): the commander around the
+//!   simulator's plant and rate loop, flown by the offboard setpoint or by PX4-like position
+//!   and attitude control (hold, land, return), sending PX4's messages in PX4's frames, with
+//!   a record of the true flight; [`vehicle::serve`] puts it on a link in real time;
+//! * [`relay`]: a fault-injecting UDP relay (loss, duplication, jitter, blackouts) for tests.
 
 pub mod frames;
 pub mod link;

@@ -27,8 +27,10 @@
 //! * Setpoints: the solver's first control, held between solves, through
 //!   [`make_setpoint`] (never non-finite, always in range); before the flight, an idle
 //!   setpoint (thrust 0: PX4 needs the stream before OFFBOARD, and arms on the ground). In a
-//!   failsafe the controller keeps running on the newest state (or its prediction) until PX4
-//!   has switched: the stream never pauses while PX4 may still be in OFFBOARD.
+//!   failsafe the controller keeps running on the newest state (or its prediction) until
+//!   PX4's HEARTBEAT shows it out of OFFBOARD: the stream never pauses while PX4 may still be
+//!   listening; then controller and stream stop, so PX4 cannot be switched back to OFFBOARD
+//!   onto stale setpoints.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
@@ -295,8 +297,9 @@ impl VehicleClock {
 pub const RESPONSE_TIME_CONSTANT: f64 = 0.03;
 
 /// `s` brought forward to `until` (at most [`MAX_PREDICTION_S`]) in 2.5 ms steps, under the
-/// setpoints in `commands` (vehicle time each was sent, collective acceleration, body rates;
-/// in time order; the one in force at a time is the last sent before it): the body rates and
+/// setpoints in `commands` (vehicle time each acts, collective acceleration, body rates; in
+/// time order; the one in force at a time is the last before it, and before the first, the
+/// first; none: zero thrust and rates): the body rates and
 /// the collective thrust follow the setpoint with [`RESPONSE_TIME_CONSTANT`] from the
 /// measured rates and the setpoint in force at `s.t`, the attitude turns by the rates,
 /// velocity and position follow thrust and gravity.
@@ -562,6 +565,7 @@ impl Pilot {
         if let Inbound::Param { name, value } = inbound
             && messages::param_name_is(&name, messages::HOVER_THRUST_PARAM)
             && self.map.is_none()
+            && self.failure.is_none()
         {
             let map = ThrustMap {
                 hover_thrust: f64::from(value),
@@ -690,6 +694,7 @@ impl Pilot {
         let tick = session.tick(now);
         out.extend(tick.send);
         let phase = session.phase();
+        let px4_mode = session.px4_mode();
         if let Some(f) = tick.failsafe {
             self.failsafes.push((f, now));
             let what = format!("failsafe: {f:?} -> {}", failsafe_mode(f));
@@ -698,11 +703,19 @@ impl Pilot {
         if tick.mpc_in_control && self.flight.is_none() {
             self.start_flight(now);
         }
-        let active = self.flight.is_some() && matches!(phase, Phase::Flying | Phase::Failsafe(_));
+        // After a failsafe request or the final landing, PX4 flies: once its HEARTBEAT shows
+        // it out of OFFBOARD the controller stops and so does the stream (PX4 then refuses
+        // OFFBOARD: nobody can switch it back onto stale setpoints). Until then the
+        // controller goes on: PX4 may still be listening.
+        let handed_over = matches!(phase, Phase::Failsafe(_) | Phase::Finishing | Phase::Done)
+            && px4_mode != Some(Px4Mode::Offboard);
+        let active = self.flight.is_some()
+            && matches!(phase, Phase::Flying | Phase::Failsafe(_))
+            && !handed_over;
         if active {
             self.control(now, wall);
         }
-        if now + 1e-9 >= self.next_setpoint {
+        if now + 1e-9 >= self.next_setpoint && !handed_over {
             let period = 1.0 / self.cfg.setpoint_rate;
             self.next_setpoint = if self.next_setpoint + period < now {
                 now + period

@@ -1,0 +1,1261 @@
+//! The controller loop ([`firmware_shim::pilot`]) without sockets, threads or wall clocks:
+//! the state input (frames, duplicates, ODOMETRY vs LOCAL_POSITION_NED + ATTITUDE_QUATERNION
+//! pairs), the latency prediction against closed forms, the period statistics, the
+//! configuration checks, and whole hover missions flown in lockstep with the simulated PX4
+//! (simulated time: the pilot's wall clock is the vehicle's clock), normal, without an answer
+//! to the hover-thrust request, through an odometry blackout (AUTO.RTL) and aborted
+//! (AUTO.LAND).
+
+use std::f64::consts::FRAC_1_SQRT_2;
+
+use firmware_shim::link::{Failsafe, Phase};
+use firmware_shim::messages::{self, Inbound, OdometryNed, Px4Mode, classify};
+use firmware_shim::pilot::{
+    MAX_PREDICTION_S, ODOMETRY_PREFERENCE_US, PAIR_WINDOW_US, PeriodStats, Pilot, PilotConfig,
+    PilotError, RESPONSE_TIME_CONSTANT, State, StateInput, predict,
+};
+use firmware_shim::setpoint::{RateLimits, SetpointError, ThrustMap};
+use firmware_shim::vehicle::{SimVehicle, VehicleConfig};
+use mavlink::MavHeader;
+use mavlink::dialects::common::{self as mc, MavCmd, MavFrame, MavMessage};
+use mpc_sim::controller::InnerCommand;
+use mpc_sim::mission::{G, MissionConfig, MissionKind, Phase as MissionPhase};
+use nalgebra::{UnitQuaternion, Vector3};
+
+/// PX4's autopilot: system 1, component 1.
+const PX4: MavHeader = MavHeader {
+    system_id: 1,
+    component_id: 1,
+    sequence: 0,
+};
+
+// ---------------------------------------------------------------------------------------
+// StateInput
+// ---------------------------------------------------------------------------------------
+
+fn odo(
+    time_us: u64,
+    position: [f32; 3],
+    velocity: [f32; 3],
+    q: [f32; 4],
+    rates: [f32; 3],
+) -> Inbound {
+    Inbound::Odometry(OdometryNed {
+        time_us,
+        position,
+        velocity,
+        q,
+        rates,
+    })
+}
+
+/// A level, nose-north ODOMETRY at rest at the origin.
+fn odo_at(time_us: u64) -> Inbound {
+    odo(time_us, [0.0; 3], [0.0; 3], [1.0, 0.0, 0.0, 0.0], [0.0; 3])
+}
+
+fn lp(time_ms: u32, position: [f32; 3]) -> Inbound {
+    Inbound::LocalPosition {
+        time_boot_ms: time_ms,
+        position,
+        velocity: [0.0; 3],
+    }
+}
+
+fn att(time_ms: u32) -> Inbound {
+    Inbound::Attitude {
+        time_boot_ms: time_ms,
+        q: [1.0, 0.0, 0.0, 0.0],
+        rates: [0.0; 3],
+    }
+}
+
+fn assert_vec(got: &Vector3<f64>, want: [f64; 3], tol: f64) {
+    let want = Vector3::from(want);
+    assert!((got - want).norm() <= tol, "got {got:?}, want {want:?}");
+}
+
+#[test]
+fn odometry_is_converted_from_ned_frd_to_enu_flu() {
+    let s = FRAC_1_SQRT_2 as f32;
+    let mut input = StateInput::default();
+    // Nose east (NED yaw 90 deg): the ENU/FLU identity.
+    let st = input
+        .on_inbound(&odo(
+            1_250_000,
+            [1.0, 2.0, -3.0],
+            [0.5, -1.5, 2.0],
+            [s, 0.0, 0.0, s],
+            [0.1, 0.2, 0.3],
+        ))
+        .expect("a state");
+    assert!((st.t - 1.25).abs() < 1e-12, "{}", st.t);
+    // North 1, east 2, 3 m up.
+    assert_vec(&st.p, [2.0, 1.0, 3.0], 0.0);
+    // North 0.5, west 1.5, 2 m/s down.
+    assert_vec(&st.v, [-1.5, 0.5, -2.0], 0.0);
+    assert!(
+        st.q.angle_to(&UnitQuaternion::identity()) < 1e-6,
+        "{:?}",
+        st.q
+    );
+    // Roll rate keeps its sign, pitch and yaw rates flip.
+    assert_vec(&st.w, [0.1, -0.2, -0.3], 1e-7);
+
+    // Level, nose north (the NED identity): ENU yaw +90 deg, the nose along ENU +y.
+    let st = input.on_inbound(&odo_at(1_260_000)).expect("a newer state");
+    let yaw90 = UnitQuaternion::from_euler_angles(0.0, 0.0, std::f64::consts::FRAC_PI_2);
+    assert!(st.q.angle_to(&yaw90) < 1e-9, "{:?}", st.q);
+
+    // Nose north, pitched up 30 deg (NED pitch +30 deg about east): the nose points north
+    // and up in ENU, the body left (FLU +y) points west, the thrust axis (FLU +z) up and
+    // back (south).
+    let th = 30f64.to_radians();
+    let qp = [(th / 2.0).cos() as f32, 0.0, (th / 2.0).sin() as f32, 0.0];
+    let st = input
+        .on_inbound(&odo(1_270_000, [0.0; 3], [0.0; 3], qp, [0.0; 3]))
+        .expect("a newer state");
+    assert_vec(&(st.q * Vector3::x()), [0.0, th.cos(), th.sin()], 1e-6);
+    assert_vec(&(st.q * Vector3::y()), [-1.0, 0.0, 0.0], 1e-6);
+    assert_vec(&(st.q * Vector3::z()), [0.0, -th.sin(), th.cos()], 1e-6);
+    assert_eq!((input.accepted, input.dropped, input.from_pairs), (3, 0, 0));
+}
+
+/// A body vector through PX4's attitude and the two vector maps, against the converted
+/// attitude: `q_enu_flu * v = ned_to_enu(q_ned_frd * flu_to_frd(v))`, for attitudes all
+/// round.
+#[test]
+fn the_converted_attitude_rotates_body_vectors_as_px4s_does() {
+    let mut input = StateInput::default();
+    let mut t = 0;
+    for i in 0..50 {
+        let x = f64::from(i);
+        let q_ned = UnitQuaternion::from_euler_angles(0.37 * x, -0.21 * x + 0.1, 0.73 * x - 2.0);
+        t += 10_000;
+        let q = [
+            q_ned.w as f32,
+            q_ned.i as f32,
+            q_ned.j as f32,
+            q_ned.k as f32,
+        ];
+        let st = input
+            .on_inbound(&odo(t, [0.0; 3], [0.0; 3], q, [0.0; 3]))
+            .unwrap();
+        for v in [
+            Vector3::x(),
+            Vector3::y(),
+            Vector3::z(),
+            Vector3::new(0.3, -0.7, 1.1),
+        ] {
+            let frd = Vector3::new(v.x, -v.y, -v.z);
+            let ned = q_ned * frd;
+            let enu = Vector3::new(ned.y, ned.x, -ned.z);
+            assert!((st.q * v - enu).norm() < 1e-6, "attitude {i}, {v:?}");
+        }
+    }
+}
+
+#[test]
+fn odometry_through_classify_from_px4_only() {
+    let msg = MavMessage::ODOMETRY(mc::ODOMETRY_DATA {
+        time_usec: 42_000,
+        x: 1.0,
+        y: 2.0,
+        z: -3.0,
+        q: [1.0, 0.0, 0.0, 0.0],
+        vx: 0.1,
+        vy: 0.2,
+        vz: 0.3,
+        rollspeed: 0.4,
+        pitchspeed: 0.5,
+        yawspeed: 0.6,
+        frame_id: MavFrame::MAV_FRAME_LOCAL_NED,
+        child_frame_id: MavFrame::MAV_FRAME_LOCAL_NED,
+        ..mc::ODOMETRY_DATA::DEFAULT
+    });
+    let mut input = StateInput::default();
+    let other = MavHeader {
+        system_id: 2,
+        ..PX4
+    };
+    assert_eq!(input.on_inbound(&classify(&other, &msg)), None);
+    assert_eq!((input.accepted, input.dropped), (0, 0));
+    let st = input.on_inbound(&classify(&PX4, &msg)).expect("from PX4");
+    assert!((st.t - 0.042).abs() < 1e-12);
+    assert_vec(&st.p, [2.0, 1.0, 3.0], 0.0);
+    assert_vec(&st.v, [0.2, 0.1, -0.3], 1e-7);
+    assert_vec(&st.w, [0.4, -0.5, -0.6], 1e-7);
+}
+
+#[test]
+fn duplicate_and_older_states_are_dropped_and_counted() {
+    let mut input = StateInput::default();
+    assert!(input.on_inbound(&odo_at(1_000)).is_some());
+    assert_eq!(input.on_inbound(&odo_at(1_000)), None, "duplicate");
+    assert_eq!(input.on_inbound(&odo_at(999)), None, "older");
+    assert_eq!(input.on_inbound(&odo_at(0)), None, "older");
+    assert_eq!((input.accepted, input.dropped), (1, 3));
+    let st = input.on_inbound(&odo_at(1_001)).expect("newer");
+    assert!((st.t - 0.001_001).abs() < 1e-15);
+    assert_eq!((input.accepted, input.dropped), (2, 3));
+    // Messages that are not states are neither.
+    let hb = Inbound::Heartbeat {
+        armed: false,
+        mode: Px4Mode::Position,
+    };
+    assert_eq!(input.on_inbound(&hb), None);
+    assert_eq!(input.on_inbound(&Inbound::Ignored), None);
+    assert_eq!((input.accepted, input.dropped), (2, 3));
+}
+
+#[test]
+fn non_finite_states_are_dropped_and_counted() {
+    let nan = f32::NAN;
+    let inf = f32::INFINITY;
+    let id = [1.0, 0.0, 0.0, 0.0];
+    let bad = [
+        odo(10, [nan, 0.0, 0.0], [0.0; 3], id, [0.0; 3]),
+        odo(20, [0.0, 0.0, inf], [0.0; 3], id, [0.0; 3]),
+        odo(30, [0.0; 3], [0.0, nan, 0.0], id, [0.0; 3]),
+        odo(40, [0.0; 3], [0.0; 3], [nan, 0.0, 0.0, 0.0], [0.0; 3]),
+        odo(50, [0.0; 3], [0.0; 3], [0.0; 4], [0.0; 3]),
+        odo(60, [0.0; 3], [0.0; 3], id, [0.0, 0.0, -inf]),
+    ];
+    let mut input = StateInput::default();
+    for (i, m) in bad.iter().enumerate() {
+        assert_eq!(input.on_inbound(m), None, "bad state {i}");
+    }
+    assert_eq!((input.accepted, input.dropped), (0, 6));
+    // A dropped state does not advance the time: a good one with its timestamp is new.
+    assert!(input.on_inbound(&odo_at(60)).is_some());
+    assert_eq!((input.accepted, input.dropped), (1, 6));
+}
+
+#[test]
+fn pairs_wait_for_the_odometry_preference_from_the_first_state_message() {
+    let mut input = StateInput::default();
+    let pref_ms = u32::try_from(ODOMETRY_PREFERENCE_US / 1000).unwrap();
+    let mut first = None;
+    // LOCAL_POSITION_NED and ATTITUDE_QUATERNION every 10 ms, 5 ms apart, from 1 s after
+    // boot.
+    let start = 1000;
+    for k in 0..100u32 {
+        let t = start + 10 * k;
+        for m in [lp(t, [1.0, 2.0, -3.0]), att(t + 5)] {
+            if let Some(s) = input.on_inbound(&m) {
+                first.get_or_insert((t, s));
+            }
+        }
+    }
+    let (t, s) = first.expect("pairs make states without ODOMETRY");
+    assert_eq!(
+        t,
+        start + pref_ms,
+        "the first pair state comes when the preference ran out"
+    );
+    // Stamped with the later of the two (the position at 1500 ms, the attitude at 1495 ms).
+    assert!(
+        (s.t - f64::from(start + pref_ms) * 1e-3).abs() < 1e-12,
+        "{}",
+        s.t
+    );
+    assert_vec(&s.p, [2.0, 1.0, 3.0], 0.0);
+    assert_eq!(input.accepted, input.from_pairs);
+    assert_eq!(input.dropped, 0);
+    // Every message from then on makes a state with its partner 5 ms away.
+    assert_eq!(input.accepted, 2 * (100 - u64::from(pref_ms / 10)));
+}
+
+#[test]
+fn pairs_are_used_only_when_odometry_stopped_for_the_preference_time() {
+    let mut input = StateInput::default();
+    let mut odometry_states = 0;
+    // 1 s of ODOMETRY and pairs together: only ODOMETRY makes states.
+    for k in 1..=100u32 {
+        let t = 10 * k;
+        if input.on_inbound(&odo_at(u64::from(t) * 1000)).is_some() {
+            odometry_states += 1;
+        }
+        assert_eq!(input.on_inbound(&lp(t, [0.0; 3])), None, "at {t} ms");
+        assert_eq!(input.on_inbound(&att(t)), None, "at {t} ms");
+    }
+    assert_eq!(odometry_states, 100);
+    assert_eq!(input.from_pairs, 0);
+    // ODOMETRY stops at 1000 ms: pairs only from 1000 ms + the preference on.
+    let last_odometry_ms = 1000;
+    let pref_ms = u32::try_from(ODOMETRY_PREFERENCE_US / 1000).unwrap();
+    let mut pair_times = Vec::new();
+    for k in 101..=200u32 {
+        let t = 10 * k;
+        if input.on_inbound(&lp(t, [0.0; 3])).is_some() {
+            pair_times.push(t);
+        }
+        // The attitude of the same instant makes the same state again: not newer.
+        let again = input.on_inbound(&att(t));
+        assert!(
+            again.is_none() || t < last_odometry_ms + pref_ms,
+            "at {t} ms"
+        );
+    }
+    assert_eq!(pair_times.first(), Some(&(last_odometry_ms + pref_ms)));
+    assert_eq!(pair_times.len(), 51, "{pair_times:?}");
+    assert_eq!(input.from_pairs, 51);
+    // ODOMETRY is back: it is preferred again at once, pairs wait the preference time.
+    assert!(input.on_inbound(&odo_at(2_005_000)).is_some());
+    assert_eq!(input.on_inbound(&lp(2010, [0.0; 3])), None);
+    assert_eq!(input.on_inbound(&att(2010)), None);
+    assert_eq!(input.from_pairs, 51);
+}
+
+#[test]
+fn pairs_further_apart_than_the_window_make_no_state() {
+    let window_ms = u32::try_from(PAIR_WINDOW_US / 1000).unwrap();
+    let mut input = StateInput::default();
+    // The first state message at 0 ms; the preference has run out from 500 ms on.
+    assert_eq!(input.on_inbound(&att(0)), None);
+    assert_eq!(
+        input.on_inbound(&lp(600, [0.0; 3])),
+        None,
+        "attitude 600 ms old"
+    );
+    let late = 600 + window_ms + 1;
+    assert_eq!(
+        input.on_inbound(&att(late)),
+        None,
+        "just outside the window"
+    );
+    assert_eq!(
+        input.on_inbound(&lp(700, [4.0, 0.0, 0.0])),
+        None,
+        "attitude 74 ms old"
+    );
+    // Exactly the window apart: a state, stamped with the later of the two.
+    let a = 700 + window_ms;
+    let s = input.on_inbound(&att(a)).expect("exactly the window apart");
+    assert!((s.t - f64::from(a) * 1e-3).abs() < 1e-12, "{}", s.t);
+    assert_vec(&s.p, [0.0, 4.0, 0.0], 0.0);
+    assert_eq!((input.accepted, input.from_pairs, input.dropped), (1, 1, 0));
+}
+
+// ---------------------------------------------------------------------------------------
+// predict
+// ---------------------------------------------------------------------------------------
+
+fn cmd(thrust_c: f64, rates: Vector3<f64>) -> InnerCommand {
+    InnerCommand { thrust_c, rates }
+}
+
+/// A state at a time whose sums with the test horizons are exact (0.5 s).
+fn state(p: [f64; 3], v: [f64; 3], q: UnitQuaternion<f64>, w: [f64; 3]) -> State {
+    State {
+        t: 0.5,
+        p: Vector3::from(p),
+        v: Vector3::from(v),
+        q,
+        w: Vector3::from(w),
+    }
+}
+
+/// Horizons (the age of the state) on the 2.5 ms grid and off it.
+const HORIZONS: [f64; 6] = [0.0025, 0.01, 0.0625, 0.125, 0.1, 0.25];
+
+#[test]
+fn a_constant_commanded_rate_turns_the_attitude_by_its_exponential() {
+    let w = Vector3::new(0.7, -1.3, 2.1);
+    let s = State {
+        w,
+        ..state(
+            [0.0; 3],
+            [0.0; 3],
+            UnitQuaternion::from_euler_angles(0.3, -0.2, 1.0),
+            [0.0; 3],
+        )
+    };
+    let commands = [(s.t - 0.1, cmd(G, w))];
+    for age in HORIZONS {
+        let out = predict(&s, &commands, s.t + age);
+        let want = s.q * UnitQuaternion::from_scaled_axis(w * age);
+        assert!(
+            out.q.angle_to(&want) < 1e-9,
+            "age {age}: {}",
+            out.q.angle_to(&want)
+        );
+        assert!((out.w - w).norm() < 1e-12, "age {age}: {:?}", out.w);
+        assert!((out.t - (s.t + age)).abs() < 1e-12);
+    }
+}
+
+#[test]
+fn no_command_history_means_zero_commands() {
+    // No setpoint sent: the rates decay to zero from the measured ones, no thrust.
+    let w0 = Vector3::new(1.0, -2.0, 0.5);
+    let s = state(
+        [1.0, 2.0, 3.0],
+        [0.0; 3],
+        UnitQuaternion::identity(),
+        [1.0, -2.0, 0.5],
+    );
+    let age = 0.125;
+    let out = predict(&s, &[], s.t + age);
+    let decay = (-age / RESPONSE_TIME_CONSTANT).exp();
+    assert!((out.w - w0 * decay).norm() < 1e-9, "{:?}", out.w);
+    assert_vec(&out.p, [1.0, 2.0, 3.0 - 0.5 * G * age * age], 1e-9);
+    // At rest, level, nothing commanded: only gravity.
+    let rest = state([0.0; 3], [0.0; 3], UnitQuaternion::identity(), [0.0; 3]);
+    let out = predict(&rest, &[], rest.t + age);
+    assert!(out.q.angle_to(&rest.q) < 1e-12);
+    assert_vec(&out.v, [0.0, 0.0, -G * age], 1e-9);
+}
+
+#[test]
+fn a_level_hover_thrust_keeps_the_velocity() {
+    // Level at any heading, c = g, no rates: unaccelerated.
+    for yaw in [0.0, 0.7, -2.5] {
+        let q = UnitQuaternion::from_euler_angles(0.0, 0.0, yaw);
+        let s = state([1.0, -2.0, 3.0], [1.0, -2.0, 0.5], q, [0.0; 3]);
+        let commands = [(s.t - 0.05, cmd(G, Vector3::zeros()))];
+        for age in HORIZONS {
+            let out = predict(&s, &commands, s.t + age);
+            assert_vec(&out.v, [1.0, -2.0, 0.5], 1e-9);
+            assert_vec(&out.p, [1.0 + age, -2.0 - 2.0 * age, 3.0 + 0.5 * age], 1e-9);
+            assert!(out.q.angle_to(&q) < 1e-12);
+        }
+    }
+}
+
+#[test]
+fn without_thrust_it_falls_freely_whatever_the_attitude() {
+    let q = UnitQuaternion::from_euler_angles(0.4, -0.3, 1.2);
+    let s = state([1.0, 2.0, 3.0], [0.5, 0.0, 2.0], q, [0.0; 3]);
+    let commands = [(s.t - 0.05, cmd(0.0, Vector3::zeros()))];
+    for age in HORIZONS {
+        let out = predict(&s, &commands, s.t + age);
+        let z = 3.0 + 2.0 * age - 0.5 * G * age * age;
+        assert_vec(&out.p, [1.0 + 0.5 * age, 2.0, z], 1e-9);
+        assert_vec(&out.v, [0.5, 0.0, 2.0 - G * age], 1e-9);
+    }
+}
+
+#[test]
+fn a_tilted_constant_thrust_accelerates_along_the_thrust_axis() {
+    let q = UnitQuaternion::from_euler_angles(0.3, 0.0, 0.0);
+    let c = 12.0;
+    let s = state([0.0; 3], [1.0, 0.0, 0.0], q, [0.0; 3]);
+    let commands = [(s.t - 0.05, cmd(c, Vector3::zeros()))];
+    let a = q * Vector3::new(0.0, 0.0, c) - Vector3::new(0.0, 0.0, G);
+    for age in HORIZONS {
+        let out = predict(&s, &commands, s.t + age);
+        let p = s.p + s.v * age + a * (0.5 * age * age);
+        assert!((out.p - p).norm() < 1e-9, "age {age}");
+        assert!((out.v - (s.v + a * age)).norm() < 1e-9, "age {age}");
+    }
+}
+
+#[test]
+fn the_prediction_is_at_most_max_prediction_s_and_never_backwards() {
+    let s = state(
+        [1.0, 2.0, 3.0],
+        [0.5, 0.0, 2.0],
+        UnitQuaternion::identity(),
+        [0.0; 3],
+    );
+    let commands = [(s.t - 0.05, cmd(0.0, Vector3::zeros()))];
+    let t = MAX_PREDICTION_S;
+    let capped = predict(&s, &commands, s.t + 1.0);
+    assert!((capped.t - (s.t + t)).abs() < 1e-12, "{}", capped.t);
+    assert_vec(
+        &capped.p,
+        [1.0 + 0.5 * t, 2.0, 3.0 + 2.0 * t - 0.5 * G * t * t],
+        1e-9,
+    );
+    assert_eq!(capped, predict(&s, &commands, s.t + t));
+    assert_eq!(capped, predict(&s, &commands, s.t + 100.0));
+    // A solve time before the state: the state itself.
+    for until in [s.t, s.t - 0.1, s.t - 10.0] {
+        assert_eq!(predict(&s, &commands, until), s, "until {until}");
+    }
+}
+
+#[test]
+fn the_rates_follow_the_command_as_a_first_order_lag() {
+    let w0 = Vector3::new(0.5, -1.0, 2.0);
+    let target = Vector3::new(2.0, 1.0, -1.0);
+    let s = state(
+        [0.0; 3],
+        [0.0; 3],
+        UnitQuaternion::identity(),
+        [0.5, -1.0, 2.0],
+    );
+    let commands = [(s.t - 0.02, cmd(G, target))];
+    for age in HORIZONS {
+        let out = predict(&s, &commands, s.t + age);
+        let want = target + (w0 - target) * (-age / RESPONSE_TIME_CONSTANT).exp();
+        // The discrete update is the exponential at the step points: round-off only.
+        assert!(
+            (out.w - want).norm() < 1e-9,
+            "age {age}: {:?} vs {want:?}",
+            out.w
+        );
+    }
+    // After one time constant, 1 - 1/e of the way.
+    let out = predict(&s, &commands, s.t + RESPONSE_TIME_CONSTANT);
+    let frac = (out.w - w0).component_div(&(target - w0));
+    for f in frac.iter() {
+        assert!((f - (1.0 - (-1.0f64).exp())).abs() < 1e-9, "{frac:?}");
+    }
+}
+
+#[test]
+fn the_command_in_force_at_each_instant_is_the_last_sent_before_it() {
+    // The rate command switches from a to b part-way through the horizon: the rates are a
+    // until then, and approach b from the switch on (within one 2.5 ms step of the switch).
+    let a = Vector3::new(1.0, 0.0, -1.0);
+    let b = Vector3::new(-3.0, 2.0, 1.0);
+    let s = state(
+        [0.0; 3],
+        [0.0; 3],
+        UnitQuaternion::identity(),
+        [1.0, 0.0, -1.0],
+    );
+    let switch = s.t + 0.06375;
+    let commands = [(s.t - 0.1, cmd(G, a)), (switch, cmd(G, b))];
+    let age = 0.125;
+    let out = predict(&s, &commands, s.t + age);
+    let want = b + (a - b) * (-(s.t + age - switch) / RESPONSE_TIME_CONSTANT).exp();
+    let step = 1.0 - (-0.0025 / RESPONSE_TIME_CONSTANT).exp();
+    let tol = (b - a).norm() * step;
+    assert!(
+        (out.w - want).norm() <= tol,
+        "{:?} vs {want:?} (tol {tol})",
+        out.w
+    );
+    // Before the switch, still a.
+    let before = predict(&s, &commands, s.t + 0.0625);
+    assert!((before.w - a).norm() < 1e-12, "{:?}", before.w);
+}
+
+#[test]
+fn the_thrust_follows_its_command_as_a_first_order_lag() {
+    // Level, hovering thrust in force; 5 m/s^2 more commanded just after the state: the
+    // vertical velocity is the integral of the lagged excess thrust.
+    let s = state([0.0; 3], [0.0; 3], UnitQuaternion::identity(), [0.0; 3]);
+    let step = 5.0;
+    let switch = s.t + 1e-4;
+    let commands = [
+        (s.t - 0.1, cmd(G, Vector3::zeros())),
+        (switch, cmd(G + step, Vector3::zeros())),
+    ];
+    let tau = RESPONSE_TIME_CONSTANT;
+    for age in [0.0625, 0.125, 0.25] {
+        let out = predict(&s, &commands, s.t + age);
+        let d = s.t + age - switch;
+        let want = step * (d - tau * (1.0 - (-d / tau).exp()));
+        let tol = step * 0.0025;
+        assert!(
+            (out.v.z - want).abs() <= tol,
+            "age {age}: {} vs {want}",
+            out.v.z
+        );
+        // Clearly not the unlagged answer.
+        assert!(step * d - out.v.z > 5.0 * tol, "age {age}");
+        assert!(out.v.xy().norm() < 1e-12);
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// PeriodStats
+// ---------------------------------------------------------------------------------------
+
+fn close(a: f64, b: f64) -> bool {
+    (a - b).abs() <= 1e-9 * b.abs().max(1.0)
+}
+
+#[test]
+fn period_stats_of_known_values() {
+    // 4, 1, 3, 2 ms and a NaN (ignored), unsorted.
+    let st = PeriodStats::of(&[0.004, 0.001, f64::NAN, 0.003, 0.002]);
+    assert_eq!(st.count, 4);
+    assert!(close(st.mean_ms, 2.5), "{st:?}");
+    // Nearest rank: the ceil(0.5 * 4) = 2nd value, the ceil(0.99 * 4) = 4th value.
+    assert!(close(st.median_ms, 2.0), "{st:?}");
+    assert!(close(st.p99_ms, 4.0), "{st:?}");
+    assert!(close(st.max_ms, 4.0), "{st:?}");
+
+    // 1..=200 ms, reversed: median the 100th, p99 the 198th.
+    let v: Vec<f64> = (1..=200).rev().map(|i| f64::from(i) * 1e-3).collect();
+    let st = PeriodStats::of(&v);
+    assert_eq!(st.count, 200);
+    assert!(close(st.mean_ms, 100.5), "{st:?}");
+    assert!(close(st.median_ms, 100.0), "{st:?}");
+    assert!(close(st.p99_ms, 198.0), "{st:?}");
+    assert!(close(st.max_ms, 200.0), "{st:?}");
+
+    // 1..=101 ms: median the 51st, p99 the ceil(99.99) = 100th.
+    let v: Vec<f64> = (1..=101).map(|i| f64::from(i) * 1e-3).collect();
+    let st = PeriodStats::of(&v);
+    assert!(close(st.median_ms, 51.0), "{st:?}");
+    assert!(close(st.p99_ms, 100.0), "{st:?}");
+    assert!(close(st.max_ms, 101.0), "{st:?}");
+
+    // 1..=160 ms: p99 the ceil(158.4) = 159th (rounding would give the 158th).
+    let v: Vec<f64> = (1..=160).map(|i| f64::from(i) * 1e-3).collect();
+    let st = PeriodStats::of(&v);
+    assert!(close(st.median_ms, 80.0), "{st:?}");
+    assert!(close(st.p99_ms, 159.0), "{st:?}");
+
+    // One value: all of them; an infinite value is not counted either.
+    let st = PeriodStats::of(&[0.0123, f64::INFINITY]);
+    assert_eq!(st.count, 1);
+    for x in [st.mean_ms, st.median_ms, st.p99_ms, st.max_ms] {
+        assert!(close(x, 12.3), "{st:?}");
+    }
+}
+
+#[test]
+fn period_stats_of_nothing_are_the_default() {
+    assert_eq!(PeriodStats::of(&[]), PeriodStats::default());
+    assert_eq!(
+        PeriodStats::of(&[f64::NAN, f64::NAN]),
+        PeriodStats::default()
+    );
+    assert_eq!(PeriodStats::default().count, 0);
+}
+
+// ---------------------------------------------------------------------------------------
+// PilotConfig::validate
+// ---------------------------------------------------------------------------------------
+
+fn hover_config() -> PilotConfig {
+    let mut mission = MissionConfig::for_kind(MissionKind::Hover);
+    mission.hover_time = 2.0;
+    PilotConfig::new(mission)
+}
+
+#[test]
+fn the_setpoint_rate_must_be_25_to_250_hz() {
+    for rate in [10.0, 300.0, 24.9, 250.1, 0.0, -100.0] {
+        let cfg = PilotConfig {
+            setpoint_rate: rate,
+            ..hover_config()
+        };
+        let e = cfg.validate().unwrap_err();
+        assert_eq!(e, PilotError::SetpointRate(rate));
+        assert!(e.to_string().contains(&format!("{rate} Hz")), "{e}");
+        assert!(Pilot::new(cfg).is_err());
+    }
+    for rate in [f64::NAN, f64::INFINITY] {
+        let cfg = PilotConfig {
+            setpoint_rate: rate,
+            ..hover_config()
+        };
+        assert!(
+            matches!(cfg.validate(), Err(PilotError::SetpointRate(_))),
+            "{rate}"
+        );
+    }
+    for rate in [25.0, 100.0, 250.0] {
+        let cfg = PilotConfig {
+            setpoint_rate: rate,
+            ..hover_config()
+        };
+        assert_eq!(cfg.validate(), Ok(()), "{rate}");
+    }
+}
+
+#[test]
+fn a_bad_thrust_map_or_rate_limit_is_rejected() {
+    for hover in [0.0, 1.5, 1.0, -0.2, f64::NAN] {
+        let cfg = PilotConfig {
+            thrust_map: Some(ThrustMap {
+                hover_thrust: hover,
+                g: G,
+            }),
+            ..hover_config()
+        };
+        let e = cfg.validate().unwrap_err();
+        assert!(
+            matches!(e, PilotError::Setpoint(SetpointError::HoverThrust(h)) if h.to_bits() == hover.to_bits()),
+            "{hover}: {e:?}"
+        );
+        assert!(Pilot::new(cfg).is_err());
+    }
+    let cfg = PilotConfig {
+        thrust_map: Some(ThrustMap {
+            hover_thrust: 0.4,
+            g: G,
+        }),
+        ..hover_config()
+    };
+    assert_eq!(cfg.validate(), Ok(()));
+    let cfg = PilotConfig {
+        limits: RateLimits {
+            max: Vector3::new(20.0, 0.0, 6.0),
+        },
+        ..hover_config()
+    };
+    assert!(matches!(
+        cfg.validate(),
+        Err(PilotError::Setpoint(SetpointError::RateLimit { .. }))
+    ));
+    let mut cfg = hover_config();
+    cfg.link.odometry_timeout = 0.0;
+    assert!(matches!(cfg.validate(), Err(PilotError::Link(_))));
+}
+
+// ---------------------------------------------------------------------------------------
+// The pilot in lockstep with the simulated PX4
+// ---------------------------------------------------------------------------------------
+
+fn is_state(m: &MavMessage) -> bool {
+    matches!(
+        m,
+        MavMessage::ODOMETRY(_)
+            | MavMessage::LOCAL_POSITION_NED(_)
+            | MavMessage::ATTITUDE_QUATERNION(_)
+    )
+}
+
+/// The pilot and the simulated PX4 in simulated time: the pilot's wall clock is the
+/// vehicle's clock, 1 ms a step.
+struct Lockstep {
+    pilot: Pilot,
+    vehicle: SimVehicle,
+    /// Everything the pilot sent, with the (simulated) time.
+    sent: Vec<(f64, MavMessage)>,
+    /// Drop ODOMETRY, LOCAL_POSITION_NED and ATTITUDE_QUATERNION on the way to the pilot.
+    block_states: bool,
+    /// Drop PARAM_REQUEST_READ on the way to the vehicle.
+    block_param_requests: bool,
+    /// When the last ODOMETRY reached the pilot.
+    last_odometry: Option<f64>,
+}
+
+impl Lockstep {
+    fn new(cfg: PilotConfig, seed: u64) -> Self {
+        Self {
+            pilot: Pilot::new(cfg).unwrap(),
+            vehicle: SimVehicle::new(VehicleConfig {
+                seed,
+                ..VehicleConfig::default()
+            }),
+            sent: Vec::new(),
+            block_states: false,
+            block_param_requests: false,
+            last_odometry: None,
+        }
+    }
+
+    fn t(&self) -> f64 {
+        self.vehicle.time()
+    }
+
+    fn step(&mut self) {
+        let msgs = self.vehicle.step(0.001);
+        let t = self.vehicle.time();
+        for m in msgs {
+            if self.block_states && is_state(&m) {
+                continue;
+            }
+            if matches!(m, MavMessage::ODOMETRY(_)) {
+                self.last_odometry = Some(t);
+            }
+            self.pilot.on_message(&PX4, &m, t);
+        }
+        for m in self.pilot.poll(t) {
+            self.sent.push((t, m.clone()));
+            if self.block_param_requests && matches!(m, MavMessage::PARAM_REQUEST_READ(_)) {
+                continue;
+            }
+            for r in self.vehicle.handle(&m) {
+                self.pilot.on_message(&PX4, &r, t);
+            }
+        }
+    }
+
+    /// Steps until `done` or the pilot has finished, at most until `limit` [s]; whether
+    /// `done` (or the end) came.
+    fn run_until(&mut self, limit: f64, mut done: impl FnMut(&Self) -> bool) -> bool {
+        while self.t() < limit {
+            self.step();
+            if self.pilot.finished() || done(self) {
+                return true;
+            }
+        }
+        false
+    }
+
+    fn setpoints(&self) -> impl Iterator<Item = (f64, &mc::SET_ATTITUDE_TARGET_DATA)> {
+        self.sent.iter().filter_map(|(t, m)| match m {
+            MavMessage::SET_ATTITUDE_TARGET(s) => Some((*t, s)),
+            _ => None,
+        })
+    }
+
+    /// The mode commands sent: (time, mode).
+    fn mode_commands(&self) -> Vec<(f64, Px4Mode)> {
+        self.sent
+            .iter()
+            .filter_map(|(t, m)| match m {
+                MavMessage::COMMAND_LONG(c) if c.command == MavCmd::MAV_CMD_DO_SET_MODE => Some((
+                    *t,
+                    Px4Mode::from_custom_mode(
+                        (u32::from(c.param2 as u8) << 16) | (u32::from(c.param3 as u8) << 24),
+                    ),
+                )),
+                _ => None,
+            })
+            .collect()
+    }
+
+    fn param_requests(&self) -> Vec<(f64, &mc::PARAM_REQUEST_READ_DATA)> {
+        self.sent
+            .iter()
+            .filter_map(|(t, m)| match m {
+                MavMessage::PARAM_REQUEST_READ(r) => Some((*t, r)),
+                _ => None,
+            })
+            .collect()
+    }
+
+    fn show(&self, name: &str) {
+        for e in self.pilot.events() {
+            eprintln!("[{name}] {:8.3}  {}", e.t, e.what);
+        }
+        for line in self.vehicle.record().summary_lines() {
+            eprintln!("[{name}] sitl: {line}");
+        }
+    }
+
+    /// Flies until `phase` has lasted `after` seconds of simulated time.
+    fn fly_into(&mut self, phase: MissionPhase, after: f64) -> f64 {
+        let mut since = None;
+        let reached = self.run_until(60.0, |ls| {
+            if ls.pilot.mission_phase() == Some(phase) {
+                let s = *since.get_or_insert(ls.t());
+                ls.t() - s >= after
+            } else {
+                false
+            }
+        });
+        assert!(reached && !self.pilot.finished(), "never in {phase:?}");
+        self.t()
+    }
+
+    /// Every setpoint is a body-rate setpoint (attitude ignored), finite, within the rate
+    /// limits, with a thrust in [0, 1].
+    fn assert_setpoints_safe(&self) {
+        let lim = RateLimits::default().max.map(|x| x as f32);
+        let mut n = 0;
+        for (t, s) in self.setpoints() {
+            n += 1;
+            assert_eq!(s.type_mask.bits(), 128, "at {t}");
+            let rates = [s.body_roll_rate, s.body_pitch_rate, s.body_yaw_rate];
+            for (r, l) in rates.iter().zip(lim.iter()) {
+                assert!(r.is_finite() && r.abs() <= *l, "at {t}: {rates:?}");
+            }
+            assert!(
+                s.thrust.is_finite() && (0.0..=1.0).contains(&s.thrust),
+                "at {t}: {}",
+                s.thrust
+            );
+            assert_eq!(s.q, [1.0, 0.0, 0.0, 0.0]);
+        }
+        assert!(n > 0, "no setpoint");
+    }
+
+    /// The vehicle is on the ground after a touchdown later than `after`, disarmed, not
+    /// crashed.
+    fn assert_landed_and_disarmed(&self, after: f64) {
+        let r = self.vehicle.record();
+        assert!(r.crashed.is_none(), "{:?}", r.crashed);
+        assert!(r.max_height.is_some_and(|h| h > 1.5), "{:?}", r.max_height);
+        let td = r.touchdowns.last().expect("touched down");
+        assert!(td.time > after, "touchdown at {} before {after}", td.time);
+        assert!(td.vertical_speed < 1.0, "{}", td.vertical_speed);
+        assert!(!self.vehicle.commander().armed());
+        assert!(r.disarmed_at.last().is_some_and(|t| *t >= td.time));
+        assert!(r.final_position.z.abs() < 0.05, "{:?}", r.final_position);
+    }
+}
+
+#[test]
+fn a_hover_mission_flies_in_lockstep_with_the_simulated_px4() {
+    let clock = std::time::Instant::now();
+    let mut ls = Lockstep::new(hover_config(), 3);
+    assert!(ls.run_until(60.0, |_| false), "finished");
+    ls.show("hover");
+    eprintln!(
+        "[hover] {:.1} s simulated in {:.2} s",
+        ls.t(),
+        clock.elapsed().as_secs_f64()
+    );
+    // The hover thrust was read from PX4, with one request.
+    assert_eq!(
+        ls.pilot.thrust_map().map(|m| m.hover_thrust as f32),
+        Some(ls.vehicle.thrust_map().hover_thrust as f32)
+    );
+    let requests = ls.param_requests();
+    assert_eq!(requests.len(), 1);
+    assert!(messages::param_name_is(
+        &requests[0].1.param_id.into(),
+        messages::HOVER_THRUST_PARAM
+    ));
+    assert_eq!(ls.pilot.failure(), None);
+    // Through to the end: mission landed, AUTO.LAND asked, PX4 disarmed.
+    assert_eq!(ls.pilot.session().map(|s| s.phase()), Some(Phase::Done));
+    assert_eq!(ls.pilot.mission_phase(), Some(MissionPhase::Landed));
+    assert_eq!(
+        ls.mode_commands()
+            .iter()
+            .map(|(_, m)| *m)
+            .collect::<Vec<_>>(),
+        [Px4Mode::Offboard, Px4Mode::Land]
+    );
+    let r = ls.vehicle.record();
+    assert_eq!(
+        r.mode_changes.iter().map(|m| m.to).collect::<Vec<_>>(),
+        [Px4Mode::Offboard, Px4Mode::Land]
+    );
+    assert!(r.mode_changes.iter().all(|m| !m.failsafe));
+    assert_eq!(r.armed_at.len(), 1);
+    ls.assert_landed_and_disarmed(0.0);
+    let td = r.touchdowns.last().unwrap();
+    assert!(td.position.xy().norm() < 0.3, "{:?}", td.position);
+    // The mission held the take-off point: the highest point is about 2 m.
+    assert!(r.max_height.is_some_and(|h| h < 2.5), "{:?}", r.max_height);
+    let report = ls.pilot.report();
+    assert!(report.failsafes.is_empty(), "{:?}", report.failsafes);
+    assert_eq!(report.states_dropped, 0);
+    assert_eq!(report.setpoints_replaced, 0);
+    let summary = report.summary.as_ref().expect("flown");
+    assert!(summary.success, "{:?}", summary.failures);
+    ls.assert_setpoints_safe();
+
+    // The stream at the configured rate, in simulated time: over the session and while the
+    // vehicle was armed.
+    let rate = ls.pilot.config().setpoint_rate;
+    let times: Vec<f64> = ls.setpoints().map(|(t, _)| t).collect();
+    assert_eq!(report.setpoints as usize, times.len());
+    let (first, last) = (times[0], times[times.len() - 1]);
+    let expected = (last - first) * rate;
+    let n = (times.len() - 1) as f64;
+    assert!(
+        (n - expected).abs() <= 0.02 * expected,
+        "{n} setpoints vs {expected}"
+    );
+    let (armed, disarmed) = (r.armed_at[0], *r.disarmed_at.last().unwrap());
+    let in_flight = times
+        .iter()
+        .filter(|t| (armed..disarmed).contains(*t))
+        .count() as f64;
+    let expected = (disarmed - armed) * rate;
+    assert!(
+        (in_flight - expected).abs() <= 0.02 * expected,
+        "{in_flight} setpoints armed vs {expected}"
+    );
+    let longest = times.windows(2).map(|w| w[1] - w[0]).fold(0.0, f64::max);
+    assert!(longest < 2.0 / rate, "a gap of {longest} s");
+    // The pilot's own figures agree (its wall clock is simulated here).
+    let period = report.setpoint_period;
+    assert!(
+        (period.mean_ms - 1e3 / rate).abs() < 0.02 * 1e3 / rate,
+        "{period:?}"
+    );
+}
+
+#[test]
+fn no_answer_to_the_hover_thrust_request_fails_after_five_seconds() {
+    let mut ls = Lockstep::new(hover_config(), 4);
+    ls.block_param_requests = true;
+    assert!(ls.run_until(10.0, |_| false), "not finished");
+    let finished_at = ls.t();
+    assert!(ls.pilot.finished());
+    let failure = ls.pilot.failure().expect("a failure");
+    assert!(failure.contains(messages::HOVER_THRUST_PARAM), "{failure}");
+    let requests = ls.param_requests();
+    assert_eq!(requests.len(), 5, "one a second, five tries");
+    for (_, r) in &requests {
+        assert!(messages::param_name_is(
+            &r.param_id.into(),
+            messages::HOVER_THRUST_PARAM
+        ));
+    }
+    for w in requests.windows(2) {
+        let dt = w[1].0 - w[0].0;
+        assert!((1.0..1.0015).contains(&dt), "requests {dt} s apart");
+    }
+    let first = requests[0].0;
+    assert!(first < 0.01, "asked at {first}");
+    let waited = finished_at - first;
+    assert!((4.99..5.01).contains(&waited), "gave up after {waited} s");
+    // Nothing else went out: no session, no setpoint, no command.
+    assert_eq!(ls.setpoints().count(), 0);
+    assert_eq!(ls.sent.len(), requests.len());
+    assert_eq!(ls.pilot.session(), None);
+    assert_eq!(ls.pilot.thrust_map(), None);
+    assert!(ls.vehicle.record().armed_at.is_empty());
+    assert!(ls.pilot.report().session.starts_with("failed:"));
+}
+
+#[test]
+fn an_unusable_or_foreign_hover_thrust_parameter_is_not_used() {
+    let value = |v: f32| {
+        MavMessage::PARAM_VALUE(mc::PARAM_VALUE_DATA {
+            param_value: v,
+            param_count: 1,
+            param_index: 0,
+            param_id: messages::HOVER_THRUST_PARAM.into(),
+            param_type: mc::MavParamType::MAV_PARAM_TYPE_REAL32,
+        })
+    };
+    // From another component: ignored.
+    let mut pilot = Pilot::new(hover_config()).unwrap();
+    let other = MavHeader {
+        component_id: 2,
+        ..PX4
+    };
+    pilot.on_message(&other, &value(0.4), 0.0);
+    assert_eq!(pilot.thrust_map(), None);
+    assert!(!pilot.finished());
+    // From PX4 but out of range: the loop cannot fly.
+    for bad in [0.0, 1.5] {
+        let mut pilot = Pilot::new(hover_config()).unwrap();
+        pilot.on_message(&PX4, &value(bad), 0.0);
+        assert_eq!(pilot.thrust_map(), None);
+        assert!(pilot.finished());
+        let f = pilot.failure().expect("a failure");
+        assert!(
+            f.contains(messages::HOVER_THRUST_PARAM) && f.contains(&bad.to_string()),
+            "{f}"
+        );
+    }
+    // In range: used.
+    let mut pilot = Pilot::new(hover_config()).unwrap();
+    pilot.on_message(&PX4, &value(0.4), 0.0);
+    assert_eq!(pilot.thrust_map().map(|m| m.hover_thrust as f32), Some(0.4));
+    assert!(!pilot.finished());
+}
+
+#[test]
+fn a_given_thrust_map_is_not_asked_for() {
+    let map = ThrustMap {
+        hover_thrust: SimVehicle::new(VehicleConfig::default())
+            .thrust_map()
+            .hover_thrust,
+        g: G,
+    };
+    let cfg = PilotConfig {
+        thrust_map: Some(map),
+        ..hover_config()
+    };
+    let mut ls = Lockstep::new(cfg, 5);
+    let flying = ls.run_until(8.0, |ls| {
+        ls.pilot.session().map(|s| s.phase()) == Some(Phase::Flying)
+    });
+    assert!(
+        flying && !ls.pilot.finished(),
+        "{:?}",
+        ls.pilot.session().map(|s| s.phase())
+    );
+    assert!(ls.param_requests().is_empty());
+    assert_eq!(ls.pilot.thrust_map(), Some(map));
+    assert!(ls.setpoints().count() > 100);
+    assert!(ls.vehicle.commander().armed());
+}
+
+#[test]
+fn an_odometry_blackout_in_the_hover_commands_return_mode_in_time() {
+    let mut ls = Lockstep::new(hover_config(), 6);
+    let start = ls.fly_into(MissionPhase::Hold, 0.5);
+    assert_eq!(ls.pilot.session().map(|s| s.phase()), Some(Phase::Flying));
+    ls.block_states = true;
+    let last_state = ls.last_odometry.expect("odometry");
+    let limit = ls.pilot.config().link.odometry_timeout;
+    let mut failsafe_seen = None;
+    assert!(ls.run_until(60.0, |ls| {
+        if failsafe_seen.is_none()
+            && matches!(
+                ls.pilot.session().map(|s| s.phase()),
+                Some(Phase::Failsafe(_))
+            )
+        {
+            failsafe_seen = Some(ls.t());
+        }
+        false
+    }));
+    ls.show("blackout");
+    let seen = failsafe_seen.expect("a failsafe");
+    assert_eq!(
+        ls.pilot.session().map(|s| s.phase()),
+        Some(Phase::Failsafe(Failsafe::OdometryLost))
+    );
+    let report = ls.pilot.report();
+    let (kind, at) = report.failsafes.first().expect("a failsafe").clone();
+    assert_eq!(kind, format!("{:?}", Failsafe::OdometryLost));
+    assert_eq!(report.failsafes.len(), 1, "{:?}", report.failsafes);
+    // On time: after the staleness limit, within 2 ms of it (the pilot's clock is the
+    // vehicle's here, the states being stamped when sent, in whole microseconds: the
+    // reported time may be a microsecond behind).
+    let late = seen - last_state - limit;
+    assert!((0.0..=0.002).contains(&late), "{late:.6} s after the limit");
+    let late = at - last_state - limit;
+    assert!(
+        (-1e-5..=0.002).contains(&late),
+        "{late:.6} s after the limit"
+    );
+    // AUTO.RTL asked at once, and flown by PX4 (commanded, not its offboard-loss failsafe).
+    let modes = ls.mode_commands();
+    let rtl = modes
+        .iter()
+        .find(|(_, m)| *m == Px4Mode::Return)
+        .expect("AUTO.RTL commanded");
+    assert!((rtl.0 - seen).abs() < 1e-9);
+    assert!(modes.iter().all(|(_, m)| *m != Px4Mode::Land), "{modes:?}");
+    assert_eq!(ls.vehicle.commander().mode(), Px4Mode::Return);
+    let r = ls.vehicle.record();
+    let change = r.mode_changes.last().unwrap();
+    assert_eq!(
+        (change.from, change.to, change.failsafe),
+        (Px4Mode::Offboard, Px4Mode::Return, false)
+    );
+    ls.assert_landed_and_disarmed(start);
+    assert!(r.touchdowns.last().unwrap().position.xy().norm() < 0.5);
+    ls.assert_setpoints_safe();
+    // The stream never paused while PX4 could have been in OFFBOARD.
+    let times: Vec<f64> = ls.setpoints().map(|(t, _)| t).collect();
+    let longest = times.windows(2).map(|w| w[1] - w[0]).fold(0.0, f64::max);
+    assert!(longest < 0.02, "a gap of {longest} s");
+}
+
+#[test]
+fn an_abort_in_the_hover_commands_land_mode() {
+    let mut ls = Lockstep::new(hover_config(), 7);
+    let start = ls.fly_into(MissionPhase::Hold, 0.5);
+    ls.pilot.abort();
+    assert!(ls.run_until(60.0, |_| false), "not finished");
+    ls.show("abort");
+    assert!(ls.pilot.finished());
+    assert_eq!(
+        ls.pilot.session().map(|s| s.phase()),
+        Some(Phase::Failsafe(Failsafe::Abort))
+    );
+    let modes = ls.mode_commands();
+    let land: Vec<_> = modes.iter().filter(|(_, m)| *m == Px4Mode::Land).collect();
+    assert_eq!(land.len(), 1, "{modes:?}");
+    assert!(
+        land[0].0 >= start && land[0].0 < start + 0.0015,
+        "{modes:?}"
+    );
+    assert_eq!(ls.vehicle.commander().mode(), Px4Mode::Land);
+    let r = ls.vehicle.record();
+    let change = r.mode_changes.last().unwrap();
+    assert_eq!((change.from, change.to), (Px4Mode::Offboard, Px4Mode::Land));
+    ls.assert_landed_and_disarmed(start);
+    let report = ls.pilot.report();
+    assert_eq!(
+        report
+            .failsafes
+            .iter()
+            .map(|(k, _)| k.as_str())
+            .collect::<Vec<_>>(),
+        [format!("{:?}", Failsafe::Abort)]
+    );
+    ls.assert_setpoints_safe();
+}
+
+#[test]
+fn a_vehicle_without_odometry_is_flown_on_position_and_attitude_pairs() {
+    let mut cfg = hover_config();
+    // Do not ask for ODOMETRY; the vehicle streams only LOCAL_POSITION_NED (30 Hz) and
+    // ATTITUDE_QUATERNION (50 Hz).
+    cfg.link.odometry_rate = 0.0;
+    let mut ls = Lockstep::new(cfg, 8);
+    ls.vehicle = SimVehicle::new(VehicleConfig {
+        seed: 8,
+        odometry_period: 0.0,
+        ..VehicleConfig::default()
+    });
+    assert!(ls.run_until(60.0, |_| false), "finished");
+    ls.show("pairs");
+    assert_eq!(ls.last_odometry, None);
+    assert_eq!(ls.pilot.session().map(|s| s.phase()), Some(Phase::Done));
+    let report = ls.pilot.report();
+    eprintln!(
+        "[pairs] states {} dropped {} setpoints {}",
+        report.states, report.states_dropped, report.setpoints
+    );
+    assert!(report.failsafes.is_empty(), "{:?}", report.failsafes);
+    ls.assert_landed_and_disarmed(0.0);
+    ls.assert_setpoints_safe();
+    // No state before the preference time since the first state message (at 1 ms), one
+    // soon after (the hover thrust is asked for at the first state).
+    let first = ls.param_requests()[0].0;
+    let pref = ODOMETRY_PREFERENCE_US as f64 * 1e-6;
+    assert!(
+        first >= 0.001 + pref - 1e-9 && first < 0.001 + pref + 0.035,
+        "first state at {first}"
+    );
+}
+
+#[test]
+fn an_abort_before_arming_commands_land_mode_and_finishes_on_the_ground() {
+    let mut ls = Lockstep::new(hover_config(), 9);
+    // Streaming, not yet in OFFBOARD.
+    assert!(!ls.run_until(1.5, |_| false));
+    assert!(matches!(
+        ls.pilot.session().map(|s| s.phase()),
+        Some(Phase::Streaming { .. } | Phase::RequestingOffboard)
+    ));
+    let t = ls.t();
+    ls.pilot.abort();
+    assert!(ls.run_until(10.0, |_| false), "not finished");
+    assert!(ls.t() - t < 3.0, "finished at {}", ls.t());
+    assert_eq!(
+        ls.pilot.session().map(|s| s.phase()),
+        Some(Phase::Failsafe(Failsafe::Abort))
+    );
+    assert!(
+        ls.mode_commands()
+            .iter()
+            .any(|(at, m)| *m == Px4Mode::Land && *at > t)
+    );
+    let r = ls.vehicle.record();
+    assert!(r.armed_at.is_empty(), "{:?}", r.armed_at);
+    assert!(r.first_liftoff.is_none());
+    assert_eq!(ls.pilot.mission_phase(), None);
+    // The setpoints were idle (zero thrust, zero rates) throughout.
+    assert!(ls.setpoints().all(|(_, s)| s.thrust == 0.0
+        && [s.body_roll_rate, s.body_pitch_rate, s.body_yaw_rate] == [0.0; 3]));
+}
+
+/// A PARAM_VALUE for MPC_THR_HOVER that arrives after the pilot gave up asking (five
+/// unanswered requests, `failure()` set, `finished()` true), or after an unusable value, is
+/// not taken: a caller that keeps polling never gets a session, setpoints or an armed
+/// vehicle from a pilot that reported it could not start.
+#[test]
+fn a_late_hover_thrust_answer_does_not_start_a_failed_pilot() {
+    let mut ls = Lockstep::new(hover_config(), 10);
+    ls.block_param_requests = true;
+    assert!(ls.run_until(10.0, |_| false));
+    assert!(ls.pilot.failure().is_some() && ls.pilot.finished());
+    // PX4's answer to the last request comes late.
+    let (_, request) = ls.sent.last().cloned().unwrap();
+    for r in ls.vehicle.handle(&request) {
+        let t = ls.t();
+        ls.pilot.on_message(&PX4, &r, t);
+    }
+    // The caller goes on polling for a while.
+    let until = ls.t() + 5.0;
+    while ls.t() < until {
+        ls.step();
+    }
+    assert!(ls.pilot.failure().is_some());
+    assert!(ls.pilot.finished());
+    assert_eq!(ls.pilot.session(), None);
+    assert_eq!(ls.setpoints().count(), 0, "setpoints after failure()");
+    assert!(
+        ls.vehicle.record().armed_at.is_empty(),
+        "armed at {:?} after failure()",
+        ls.vehicle.record().armed_at
+    );
+}
