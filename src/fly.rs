@@ -1,7 +1,6 @@
 //! `mpcc fly`: fly a mission through PX4 over MAVLink with the generated NMPC, and
 //! `mpcc sitl`: the simulated PX4 vehicle to fly it against.
 
-use std::path::Path;
 use std::process::ExitCode;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -11,9 +10,9 @@ use firmware_shim::messages;
 use firmware_shim::pilot::{self, Pilot, PilotConfig};
 use firmware_shim::setpoint::ThrustMap;
 use firmware_shim::transport::{Address, Link};
-use firmware_shim::vehicle::{SimVehicle, VehicleConfig, mode_name};
+use firmware_shim::vehicle::{SimVehicle, VehicleConfig};
 use mpc_sim::estimator::EstimatorConfig;
-use mpc_sim::mission::{G, MissionKind, Phase};
+use mpc_sim::mission::{G, MissionKind};
 use mpc_sim::report;
 
 use crate::{FlyArgs, SitlArgs};
@@ -55,8 +54,7 @@ fn mission_kind(name: &str) -> Result<MissionKind, String> {
 
 fn pilot_config(args: &FlyArgs) -> Result<PilotConfig, String> {
     let kind = mission_kind(&args.mission)?;
-    let mut mission =
-        crate::sim::mission_config(kind, args.rally.as_deref(), args.altitude, args.flip_rate)?;
+    let mut mission = crate::sim::mission_config(kind, &args.shape)?;
     if let Some(h) = args.hover_time {
         if kind != MissionKind::Hover {
             return Err("--hover-time is a setting of --mission hover".to_string());
@@ -197,7 +195,13 @@ pub(crate) fn fly(args: &FlyArgs) -> ExitCode {
     }
     if !args.no_plots
         && !pilot.samples().is_empty()
-        && let Err(e) = write_outputs(&args.out, &args.mission, pilot.samples(), args.json)
+        && let Err(e) = crate::sim::write_log_and_plots(
+            &args.out,
+            &format!("fly_{}", args.mission),
+            &format!("{} · mpcc fly · PX4 telemetry", args.mission),
+            pilot.samples(),
+            args.json,
+        )
     {
         eprintln!("error: {e}");
         return ExitCode::FAILURE;
@@ -243,33 +247,6 @@ fn print_link_figures(rep: &pilot::FlightReport) {
     );
 }
 
-fn write_outputs(
-    dir: &Path,
-    mission: &str,
-    samples: &[mpc_sim::log::Sample],
-    quiet: bool,
-) -> Result<(), String> {
-    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-    let csv = dir.join(format!("fly_{mission}.csv"));
-    mpc_sim::plot::write_csv(&csv, samples).map_err(|e| e.to_string())?;
-    let title = format!("{mission} · mpcc fly · PX4 telemetry");
-    let names = Phase::names();
-    let plots =
-        mpc_sim::plot::write_plots(dir, &format!("fly_{mission}_"), &title, samples, &names)
-            .map_err(|e| e.to_string())?;
-    if !quiet {
-        println!(
-            "wrote {}, {}, {}, {}, {}",
-            csv.display(),
-            plots.position.display(),
-            plots.rates.display(),
-            plots.thrust.display(),
-            plots.solver_time.display()
-        );
-    }
-    Ok(())
-}
-
 pub(crate) fn sitl(args: &SitlArgs) -> ExitCode {
     if let Some(d) = args.duration
         && !(d.is_finite() && d > 0.0)
@@ -309,17 +286,7 @@ pub(crate) fn sitl(args: &SitlArgs) -> ExitCode {
         let r = v.record();
         if !json {
             for m in r.mode_changes.iter().skip(shown) {
-                eprintln!(
-                    "{:9.3} s  {} -> {}{}",
-                    m.time,
-                    mode_name(m.from),
-                    mode_name(m.to),
-                    if m.failsafe {
-                        " (offboard-loss failsafe)"
-                    } else {
-                        ""
-                    }
-                );
+                eprintln!("{:9.3} s  {m}", m.time);
             }
         }
         shown = r.mode_changes.len();
@@ -359,14 +326,14 @@ fn sitl_summary(vehicle: &SimVehicle, json: bool) -> ExitCode {
             })).collect::<Vec<_>>(),
             "mode_changes": r.mode_changes.iter().map(|m| serde_json::json!({
                 "time_s": m.time,
-                "from": mode_name(m.from),
-                "to": mode_name(m.to),
+                "from": m.from.to_string(),
+                "to": m.to.to_string(),
                 "failsafe": m.failsafe,
             })).collect::<Vec<_>>(),
             "armed_at_s": r.armed_at,
             "disarmed_at_s": r.disarmed_at,
             "armed": vehicle.commander().armed(),
-            "mode": mode_name(vehicle.commander().mode()),
+            "mode": vehicle.commander().mode().to_string(),
             "offboard_loss_failsafe_at_s": vehicle.commander().failsafe_at(),
             "final_position_m": v3(&r.final_position),
         });

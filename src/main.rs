@@ -50,6 +50,21 @@ enum Command {
     Sitl(SitlArgs),
 }
 
+/// Where the mission flies, for `mpcc sim` and `mpcc fly`.
+#[derive(clap::Args)]
+struct MissionShape {
+    /// Rally point, where the flip happens and which is held after it, relative to home (ENU)
+    /// [m] (default 4,0,2).
+    #[arg(long, value_name = "X,Y,Z")]
+    rally: Option<String>,
+    /// Take-off height above home [m] (default 2; also the return height).
+    #[arg(long, value_name = "M")]
+    altitude: Option<f64>,
+    /// Pitch-rate reference of the flip [rad/s] (default 5*pi = 15.71).
+    #[arg(long, value_name = "RAD_S")]
+    flip_rate: Option<f64>,
+}
+
 #[derive(clap::Args)]
 struct FlyArgs {
     /// The link to PX4: udpin:HOST:PORT (listen, answer the sender; PX4 SITL's offboard link
@@ -72,15 +87,8 @@ struct FlyArgs {
     /// The hover mission's hold [s] (default 5).
     #[arg(long, value_name = "S")]
     hover_time: Option<f64>,
-    /// Rally point, relative to where the vehicle starts (ENU) [m] (default 4,0,2).
-    #[arg(long, value_name = "X,Y,Z")]
-    rally: Option<String>,
-    /// Take-off height [m] (default 2).
-    #[arg(long, value_name = "M")]
-    altitude: Option<f64>,
-    /// Pitch-rate reference of the flip [rad/s] (default 5*pi).
-    #[arg(long, value_name = "RAD_S")]
-    flip_rate: Option<f64>,
+    #[command(flatten)]
+    shape: MissionShape,
     /// Give up (and land) after this long [s].
     #[arg(long, default_value_t = 180.0, value_name = "S")]
     timeout: f64,
@@ -179,15 +187,8 @@ struct SimArgs {
     /// No estimation noise or latency (the true state).
     #[arg(long)]
     perfect_sensing: bool,
-    /// Rally point, where the flip happens and which is held after it [m] (default 4,0,2).
-    #[arg(long, value_name = "X,Y,Z")]
-    rally: Option<String>,
-    /// Take-off height above home [m] (default 2; also the return height).
-    #[arg(long, value_name = "M")]
-    altitude: Option<f64>,
-    /// Pitch-rate reference of the flip [rad/s] (default 5*pi = 15.71).
-    #[arg(long, value_name = "RAD_S")]
-    flip_rate: Option<f64>,
+    #[command(flatten)]
+    shape: MissionShape,
     /// True vehicle mass [kg] (the controllers keep believing the nominal 1 kg).
     #[arg(long, value_name = "KG")]
     mass: Option<f64>,

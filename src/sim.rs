@@ -76,10 +76,9 @@ pub(crate) fn check_solver(controller: &str, quiet: bool) -> Result<(), String> 
 /// `--flip-rate` (shared by `mpcc sim` and `mpcc fly`).
 pub(crate) fn mission_config(
     kind: MissionKind,
-    rally: Option<&str>,
-    altitude: Option<f64>,
-    flip_rate: Option<f64>,
+    shape: &crate::MissionShape,
 ) -> Result<MissionConfig, String> {
+    let (rally, altitude, flip_rate) = (shape.rally.as_deref(), shape.altitude, shape.flip_rate);
     let mut m = MissionConfig::for_kind(kind);
     if let Some(r) = rally {
         let v: Vec<f64> = r
@@ -182,7 +181,7 @@ pub(crate) fn run(args: &SimArgs) -> ExitCode {
         return crate::throw::run(args);
     }
     let (_, controller, mission_cfg) = match parse(args).and_then(|(m, c)| {
-        let cfg = mission_config(m, args.rally.as_deref(), args.altitude, args.flip_rate)?;
+        let cfg = mission_config(m, &args.shape)?;
         Ok((m, c, cfg))
     }) {
         Ok(v) => v,
@@ -342,18 +341,29 @@ where
 }
 
 fn write_outputs(dir: &Path, res: &TrialResult, mission: &str, quiet: bool) -> Result<(), String> {
-    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-    let csv = dir.join(format!("{mission}.csv"));
-    mpc_sim::plot::write_csv(&csv, &res.samples).map_err(|e| e.to_string())?;
     let title = format!(
         "{mission} · {} controller · seed {}",
         res.config.controller.name(),
         res.config.seed
     );
+    write_log_and_plots(dir, mission, &title, &res.samples, quiet)
+}
+
+/// Writes `DIR/STEM.csv` and the four plots `DIR/STEM_*.png` of a flight log; says so unless
+/// `quiet`.
+pub(crate) fn write_log_and_plots(
+    dir: &Path,
+    stem: &str,
+    title: &str,
+    samples: &[mpc_sim::log::Sample],
+    quiet: bool,
+) -> Result<(), String> {
+    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let csv = dir.join(format!("{stem}.csv"));
+    mpc_sim::plot::write_csv(&csv, samples).map_err(|e| e.to_string())?;
     let names = Phase::names();
-    let plots =
-        mpc_sim::plot::write_plots(dir, &format!("{mission}_"), &title, &res.samples, &names)
-            .map_err(|e| e.to_string())?;
+    let plots = mpc_sim::plot::write_plots(dir, &format!("{stem}_"), title, samples, &names)
+        .map_err(|e| e.to_string())?;
     if !quiet {
         println!(
             "wrote {}, {}, {}, {}, {}",

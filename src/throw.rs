@@ -38,9 +38,9 @@ fn base(args: &SimArgs) -> Result<ThrowSimConfig, String> {
         ));
     }
     for (set, flag) in [
-        (args.rally.is_some(), "--rally"),
-        (args.altitude.is_some(), "--altitude"),
-        (args.flip_rate.is_some(), "--flip-rate"),
+        (args.shape.rally.is_some(), "--rally"),
+        (args.shape.altitude.is_some(), "--altitude"),
+        (args.shape.flip_rate.is_some(), "--flip-rate"),
         (args.pose_loss.is_some(), "--pose-loss"),
         (args.randomize, "--randomize"),
     ] {

@@ -10,7 +10,7 @@ use std::io::{BufRead, BufReader};
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
-use common::{mpcc, wait_with_timeout};
+use common::{mpcc, num, wait_with_timeout};
 
 fn free_port() -> u16 {
     let s = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
@@ -34,12 +34,6 @@ fn json(text: &str) -> serde_json::Value {
         .find(|l| l.starts_with('{'))
         .unwrap_or_else(|| panic!("no JSON in\n{text}"));
     serde_json::from_str(line).unwrap()
-}
-
-fn num(v: &serde_json::Value, key: &str) -> f64 {
-    v.get(key)
-        .and_then(serde_json::Value::as_f64)
-        .unwrap_or_else(|| panic!("{key} missing or not a number in {v}"))
 }
 
 #[test]

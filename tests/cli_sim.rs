@@ -4,13 +4,7 @@ mod common;
 
 use std::path::Path;
 
-use common::mpcc;
-
-fn num(v: &serde_json::Value, key: &str) -> f64 {
-    v.get(key)
-        .and_then(serde_json::Value::as_f64)
-        .unwrap_or_else(|| panic!("{key} missing or not a number in {v}"))
-}
+use common::{mpcc, num};
 
 #[test]
 fn default_run_flies_the_flip_and_writes_log_and_plots() {

@@ -56,6 +56,19 @@ pub enum Px4Mode {
     Other(u8, u8),
 }
 
+impl core::fmt::Display for Px4Mode {
+    /// The mode as PX4's ground station names it ("OFFBOARD", "AUTO.RTL", ...).
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Px4Mode::Offboard => f.write_str("OFFBOARD"),
+            Px4Mode::Land => f.write_str("AUTO.LAND"),
+            Px4Mode::Return => f.write_str("AUTO.RTL"),
+            Px4Mode::Position => f.write_str("POSCTL"),
+            Px4Mode::Other(main, sub) => write!(f, "mode {main}.{sub}"),
+        }
+    }
+}
+
 impl Px4Mode {
     /// Decodes a HEARTBEAT `custom_mode`.
     pub fn from_custom_mode(custom_mode: u32) -> Self {

@@ -618,7 +618,7 @@ impl Pilot {
             if before != after {
                 let what = format!(
                     "PX4: {}, {}",
-                    after.0.map_or("?".to_string(), mode_name),
+                    after.0.map_or("?".to_string(), |m| m.to_string()),
                     if after.1 { "armed" } else { "disarmed" }
                 );
                 self.event(now, what);
@@ -965,16 +965,6 @@ fn inbound_odometry() -> Inbound {
         q: [1.0, 0.0, 0.0, 0.0],
         rates: [0.0; 3],
     })
-}
-
-fn mode_name(m: Px4Mode) -> String {
-    match m {
-        Px4Mode::Offboard => "OFFBOARD".to_string(),
-        Px4Mode::Land => "AUTO.LAND".to_string(),
-        Px4Mode::Return => "AUTO.RTL".to_string(),
-        Px4Mode::Position => "POSCTL".to_string(),
-        Px4Mode::Other(main, sub) => format!("mode {main}.{sub}"),
-    }
 }
 
 fn failsafe_mode(f: Failsafe) -> &'static str {

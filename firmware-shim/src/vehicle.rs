@@ -219,17 +219,6 @@ fn tilt_free_heading(q: &UnitQuaternion<f64>) -> f64 {
     x.y.atan2(x.x)
 }
 
-/// A Px4Mode as PX4's ground station names it ("OFFBOARD", "AUTO.RTL", ...).
-pub fn mode_name(mode: Px4Mode) -> String {
-    match mode {
-        Px4Mode::Offboard => "OFFBOARD".to_string(),
-        Px4Mode::Land => "AUTO.LAND".to_string(),
-        Px4Mode::Return => "AUTO.RTL".to_string(),
-        Px4Mode::Position => "POSCTL".to_string(),
-        Px4Mode::Other(m, s) => format!("mode {m}.{s}"),
-    }
-}
-
 /// A touchdown of the true vehicle.
 #[derive(Clone, Debug, PartialEq)]
 pub struct TouchdownRecord {
@@ -257,6 +246,17 @@ pub struct ModeChange {
     /// Whether PX4 changed it on its own for the offboard-loss failsafe (otherwise it was
     /// commanded).
     pub failsafe: bool,
+}
+
+impl core::fmt::Display for ModeChange {
+    /// "OFFBOARD -> POSCTL (offboard-loss failsafe)".
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(f, "{} -> {}", self.from, self.to)?;
+        if self.failsafe {
+            f.write_str(" (offboard-loss failsafe)")?;
+        }
+        Ok(())
+    }
 }
 
 /// The true flight of a [`SimVehicle`], kept up to date at every 1 ms step.
@@ -358,17 +358,7 @@ impl FlightRecord {
             out.push(format!("disarmed at {}", times(&self.disarmed_at)));
         }
         for m in &self.mode_changes {
-            out.push(format!(
-                "mode at {:.3} s: {} -> {}{}",
-                m.time,
-                mode_name(m.from),
-                mode_name(m.to),
-                if m.failsafe {
-                    " (offboard-loss failsafe)"
-                } else {
-                    ""
-                }
-            ));
+            out.push(format!("mode at {:.3} s: {m}", m.time));
         }
         for t in &self.touchdowns {
             out.push(format!(

@@ -68,3 +68,11 @@ pub fn wait_with_timeout(
         stderr: err.join().unwrap_or_default(),
     }
 }
+
+/// The number `key` of a JSON object (panics naming the key if it is missing).
+#[allow(dead_code)] // not every test binary that includes this module reads JSON
+pub fn num(v: &serde_json::Value, key: &str) -> f64 {
+    v.get(key)
+        .and_then(serde_json::Value::as_f64)
+        .unwrap_or_else(|| panic!("{key} missing or not a number in {v}"))
+}
