@@ -242,6 +242,65 @@ fn ctrl_c_lands_the_vehicle_instead_of_just_exiting() {
 }
 
 #[test]
+fn fly_json_has_the_documented_fields() {
+    let port = free_port();
+    let mut sitl = spawn(&[
+        "sitl",
+        "--connect",
+        &format!("udpout:127.0.0.1:{port}"),
+        "--exit-after-flight",
+        "--duration",
+        "60",
+    ]);
+    let mut fly = spawn(&[
+        "fly",
+        "--connect",
+        &format!("udpin:127.0.0.1:{port}"),
+        "--mission",
+        "hover",
+        "--hover-time",
+        "1",
+        "--hover-thrust",
+        "0.2503",
+        "--rate",
+        "50",
+        "--json",
+        "--no-plots",
+    ]);
+    let f = wait_with_timeout(&mut fly, Duration::from_secs(90));
+    let _ = wait_with_timeout(&mut sitl, Duration::from_secs(30));
+    assert!(
+        f.status.is_some_and(|c| c.success()),
+        "{}\n{}",
+        f.stdout,
+        f.stderr
+    );
+    // stdout is the one JSON object and nothing else.
+    assert_eq!(f.stdout.trim().lines().count(), 1, "{}", f.stdout);
+    let v = json(&f.stdout);
+    assert_eq!(v["summary"]["success"], true, "{v}");
+    assert_eq!(v["session"], "Done");
+    assert_eq!(v["failsafes"].as_array().map(Vec::len), Some(0));
+    assert!(num(&v, "states") > 500.0, "{v}");
+    assert_eq!(num(&v, "states_dropped"), 0.0);
+    assert_eq!(num(&v, "fallbacks"), 0.0);
+    // --rate 50: a 20 ms stream.
+    let period = &v["setpoint_period"];
+    assert!((num(period, "median_ms") - 20.0).abs() < 2.0, "{period}");
+    for key in ["mean_ms", "p99_ms", "max_ms", "count"] {
+        num(period, key);
+        num(&v["solver_period"], key);
+    }
+    assert!(
+        (num(&v["solver_period"], "median_ms") - 50.0).abs() < 5.0,
+        "{v}"
+    );
+    assert!(num(&v["solver_us"], "mean") > 0.0);
+    assert!(num(&v, "setpoints") > 0.0 && num(&v, "setpoints_clamped") >= 0.0);
+    assert!(num(&v, "setpoints_replaced") == 0.0);
+}
+
+#[test]
 fn fly_and_sitl_reject_bad_input_with_a_clear_message() {
     let port = free_port().to_string();
     let udpin = format!("udpin:127.0.0.1:{port}");
