@@ -81,7 +81,7 @@ struct FlyArgs {
     /// Setpoint rate [Hz] (25..250; the solver runs at its model's 20 Hz).
     #[arg(long, default_value_t = 100.0, value_name = "HZ")]
     rate: f64,
-    /// Odometry older than this commands PX4's return mode [s].
+    /// No new odometry for this long in flight commands PX4's return mode [s].
     #[arg(long, default_value_t = 0.1, value_name = "S")]
     odometry_timeout: f64,
     /// The hover mission's hold [s] (default 5).

@@ -50,7 +50,7 @@ pub struct LinkConfig {
     pub stream_before_offboard: f64,
     /// After an accepted mode or arm command, wait this long for the HEARTBEAT to show it.
     pub confirm_timeout: f64,
-    /// Odometry older than this in flight is lost: return mode.
+    /// No new odometry for longer than this in flight: lost, return mode.
     pub odometry_timeout: f64,
     /// This many consecutive solver failures: return mode.
     pub max_solver_failures: u32,
