@@ -19,7 +19,7 @@
 //!
 //! Failsafes while flying:
 //!
-//! * odometry older than [`LinkConfig::odometry_timeout`] (100 ms) or never received: request
+//! * no new odometry for [`LinkConfig::odometry_timeout`] (100 ms), or none ever: request
 //!   return mode (AUTO.RTL), the paper's trial-9 behaviour;
 //! * [`LinkConfig::max_solver_failures`] consecutive solver failures (each one already flew
 //!   the previous plan, from the runtime): request return mode;
