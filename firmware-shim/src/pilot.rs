@@ -48,7 +48,7 @@ use nalgebra::{UnitQuaternion, Vector3};
 
 use crate::frames::{frd_to_flu, ned_to_enu, quat_from_mavlink, quat_ned_frd_to_enu_flu};
 use crate::link::{Failsafe, LinkConfig, LinkConfigError, Phase, Session};
-use crate::messages::{self, Inbound, LandedState, Px4Mode};
+use crate::messages::{self, Inbound, Px4Mode};
 use crate::setpoint::{Px4Setpoint, RateLimits, SetpointError, ThrustMap, make_setpoint};
 use crate::transport::Link;
 
@@ -451,10 +451,7 @@ pub struct Pilot {
     abort: bool,
     events: Vec<Event>,
     failsafes: Vec<(Failsafe, f64)>,
-    last_odometry_t: Option<f64>,
     link_delay: f64,
-    landed_state: Option<LandedState>,
-    was_armed: bool,
     finished_at: Option<f64>,
 }
 
@@ -490,10 +487,7 @@ impl Pilot {
             abort: false,
             events: Vec::new(),
             failsafes: Vec::new(),
-            last_odometry_t: None,
             link_delay: 0.0,
-            landed_state: None,
-            was_armed: false,
             finished_at: None,
         })
     }
@@ -559,9 +553,6 @@ impl Pilot {
     /// Handles a message received at wall time `wall` [s].
     pub fn on_message(&mut self, header: &MavHeader, msg: &MavMessage, wall: f64) {
         let inbound = messages::classify(header, msg);
-        if let Inbound::Landed(l) = inbound {
-            self.landed_state = Some(l);
-        }
         if let Inbound::Param { name, value } = inbound
             && messages::param_name_is(&name, messages::HOVER_THRUST_PARAM)
             && self.map.is_none()
@@ -593,7 +584,6 @@ impl Pilot {
         if let Some(s) = self.input.on_inbound(&inbound) {
             self.clock.set(s.t, wall);
             self.state = Some(s);
-            self.last_odometry_t = Some(s.t);
             let now = self.clock.now(wall).unwrap_or(s.t);
             // Mean delay of the states over the least delayed one (~1 s memory).
             self.link_delay += 0.02 * ((now - s.t).clamp(0.0, MAX_PREDICTION_S) - self.link_delay);
@@ -614,7 +604,6 @@ impl Pilot {
             let before = (session.px4_mode(), session.armed());
             session.on_inbound(&inbound, now);
             let after = (session.px4_mode(), session.armed());
-            self.was_armed |= session.armed();
             if before != after {
                 let what = format!(
                     "PX4: {}, {}",
