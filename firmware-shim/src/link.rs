@@ -44,7 +44,10 @@ pub struct LinkConfig {
     pub heartbeat_period: f64,
     /// Wait this long for a COMMAND_ACK before retransmitting.
     pub ack_timeout: f64,
-    /// Retransmissions of an unacknowledged command before giving up.
+    /// Retransmissions of a command that is not acknowledged (or not shown by the
+    /// HEARTBEAT) before giving up. With 20 % loss each way an arm command and its single
+    /// acknowledgement both get through with probability 0.64; six tries fail together with
+    /// probability 0.2 %.
     pub retries: u8,
     /// Setpoints stream this long before OFFBOARD is requested (PX4 needs > 0).
     pub stream_before_offboard: f64,
@@ -59,14 +62,14 @@ pub struct LinkConfig {
 }
 
 impl Default for LinkConfig {
-    /// Heartbeat 1 s, ack timeout 0.5 s with 3 retries, 1 s of streaming before OFFBOARD,
+    /// Heartbeat 1 s, ack timeout 0.5 s with 5 retries, 1 s of streaming before OFFBOARD,
     /// 2 s for the heartbeat to confirm, odometry timeout 0.1 s, 5 solver failures, ODOMETRY
     /// at 100 Hz.
     fn default() -> Self {
         Self {
             heartbeat_period: 1.0,
             ack_timeout: 0.5,
-            retries: 3,
+            retries: 5,
             stream_before_offboard: 1.0,
             confirm_timeout: 2.0,
             odometry_timeout: 0.1,
@@ -372,9 +375,21 @@ impl Session {
                 self.pending = None;
             } else if let Some(ta) = p.acked_at {
                 if now - ta > self.cfg.confirm_timeout {
-                    self.pending = None;
-                    if !matches!(self.phase, Phase::Failsafe(_) | Phase::Finishing) {
+                    // Acknowledged, but the HEARTBEAT never showed it (heartbeats lost, or
+                    // PX4 changed its mind): ask again, as for a missing acknowledgement.
+                    let keep_asking = matches!(self.phase, Phase::Failsafe(_) | Phase::Finishing);
+                    if p.attempts >= self.cfg.retries && !keep_asking {
+                        self.pending = None;
                         self.phase = Phase::Failed(SessionError::NotConfirmed(p.cmd.mav_cmd()));
+                    } else {
+                        let attempts = p.attempts.saturating_add(1);
+                        self.pending = Some(Pending {
+                            sent_at: now,
+                            attempts,
+                            acked_at: None,
+                            ..p
+                        });
+                        tick.send.push(messages::command_long(p.cmd, attempts));
                     }
                 }
             } else if now - p.sent_at >= self.cfg.ack_timeout {

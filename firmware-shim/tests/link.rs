@@ -52,6 +52,8 @@ struct Px4 {
     odometry: bool,
     acks: bool,
     interval_ok: bool,
+    /// Whether the HEARTBEAT shows what was commanded.
+    shows: bool,
 }
 
 impl Px4 {
@@ -62,6 +64,7 @@ impl Px4 {
             odometry: true,
             acks: true,
             interval_ok: true,
+            shows: true,
         }
     }
 
@@ -69,19 +72,22 @@ impl Px4 {
         for ((cmd, p2, _), p3) in commands(sent).into_iter().zip(param3(sent)) {
             match cmd {
                 MavCmd::MAV_CMD_DO_SET_MODE => {
-                    self.mode = match p2 as u8 {
+                    let mode = match p2 as u8 {
                         6 => Px4Mode::Offboard,
                         4 if p3 as u8 == 6 => Px4Mode::Land,
                         4 => Px4Mode::Return,
                         _ => self.mode,
                     };
+                    if self.shows {
+                        self.mode = mode;
+                    }
                     if self.acks {
                         s.on_inbound(&ack(cmd, true), now);
                         s.on_inbound(&ack(cmd, true), now);
                     }
                 }
                 MavCmd::MAV_CMD_COMPONENT_ARM_DISARM => {
-                    self.armed = true;
+                    self.armed |= self.shows;
                     if self.acks {
                         s.on_inbound(&ack(cmd, true), now);
                     }
@@ -168,7 +174,7 @@ fn unacknowledged_commands_are_retried_then_the_session_fails() {
         acks: false,
         ..Px4::new()
     };
-    let log = run(&mut s, &mut px4, 0.0, 6.0);
+    let log = run(&mut s, &mut px4, 0.0, 8.0);
     let sent = |which: MavCmd| -> Vec<(f64, u8)> {
         log.iter()
             .flat_map(|(t, m)| {
@@ -392,4 +398,35 @@ fn bad_link_settings_are_named() {
         ..LinkConfig::default()
     };
     assert_eq!(bad.validate().unwrap_err().name, "odometry_rate");
+}
+
+#[test]
+fn an_acknowledged_command_the_heartbeat_never_shows_is_asked_again_then_fails() {
+    let cfg = LinkConfig {
+        odometry_rate: 0.0,
+        ..LinkConfig::default()
+    };
+    let mut s = Session::new(cfg, 0.0);
+    let mut px4 = Px4 {
+        shows: false,
+        ..Px4::new()
+    };
+    let log = run(&mut s, &mut px4, 0.0, 30.0);
+    let modes: Vec<(f64, u8)> = log
+        .iter()
+        .flat_map(|(t, m)| {
+            commands(std::slice::from_ref(m))
+                .into_iter()
+                .map(move |c| (*t, c.2))
+        })
+        .collect();
+    // Each try waits confirm_timeout after its acknowledgement, then asks again.
+    assert_eq!(modes.len(), 1 + usize::from(cfg.retries), "{modes:?}");
+    for w in modes.windows(2) {
+        assert!(w[1].0 - w[0].0 > cfg.confirm_timeout, "{modes:?}");
+    }
+    assert_eq!(
+        s.phase(),
+        Phase::Failed(SessionError::NotConfirmed(MavCmd::MAV_CMD_DO_SET_MODE))
+    );
 }
