@@ -10,17 +10,8 @@ use nalgebra::{Quaternion, Vector3};
 const QR: &str = include_str!("../../models/quadrotor_rates.mpc");
 const PM: &str = include_str!("../../models/paper_pointmass.mpc");
 
-/// Small deterministic generator (xorshift64*), uniform in [lo, hi).
-struct Rng(u64);
-impl Rng {
-    fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        let r = self.0.wrapping_mul(0x2545_f491_4f6c_dd1d);
-        lo + (hi - lo) * ((r >> 11) as f64 / (1u64 << 53) as f64)
-    }
-}
+mod common;
+use common::Rng;
 
 fn parse_ok<'g>(g: &'g Graph, src: &str, variant: Option<&str>) -> Ocp<'g> {
     let opts = ParseOptions {

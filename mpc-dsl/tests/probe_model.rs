@@ -17,16 +17,8 @@ const SRC: &str = include_str!("../../models/quadrotor_probe.mpc");
 const G: f64 = 9.81;
 const L: f64 = 0.5;
 
-struct Rng(u64);
-impl Rng {
-    fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        let r = self.0.wrapping_mul(0x2545_f491_4f6c_dd1d);
-        lo + (hi - lo) * ((r >> 11) as f64 / (1u64 << 53) as f64)
-    }
-}
+mod common;
+use common::Rng;
 
 fn model(g: &Graph) -> Ocp<'_> {
     match parse(g, SRC, &ParseOptions::default()) {
