@@ -6,7 +6,6 @@ use std::time::Instant;
 
 use indicatif::{ProgressBar, ProgressStyle};
 use mpc_sim::estimator::EstimatorConfig;
-use mpc_sim::mission::Phase;
 use mpc_sim::throw::{
     self as th, LANDING_TOL_M, ThrowConfig, ThrowRunSummary, ThrowSimConfig, ThrowTrial,
 };
@@ -193,22 +192,12 @@ fn row_json(range: f64, row: &Result<ThrowRunSummary, String>) -> serde_json::Va
 }
 
 fn write_outputs(dir: &Path, range: f64, res: &ThrowTrial, quiet: bool) -> Result<(), String> {
-    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     let stem = format!("flip-throw_{range}m");
-    let csv = dir.join(format!("{stem}.csv"));
-    mpc_sim::plot::write_csv(&csv, &res.samples).map_err(|e| e.to_string())?;
     let title = format!(
         "flip-throw {range} m · probe NMPC · seed {}",
         res.config.seed
     );
-    let plots = mpc_sim::plot::write_plots(
-        dir,
-        &format!("{stem}_"),
-        &title,
-        &res.samples,
-        &Phase::names(),
-    )
-    .map_err(|e| e.to_string())?;
+    crate::sim::write_log_and_plots(dir, &stem, &title, &res.samples, quiet)?;
     let side = dir.join(format!("{stem}_probe.png"));
     mpc_sim::plot::write_throw_plot(
         &side,
@@ -217,15 +206,7 @@ fn write_outputs(dir: &Path, range: f64, res: &ThrowTrial, quiet: bool) -> Resul
     )
     .map_err(|e| e.to_string())?;
     if !quiet {
-        println!(
-            "wrote {}, {}, {}, {}, {}, {}",
-            csv.display(),
-            side.display(),
-            plots.position.display(),
-            plots.rates.display(),
-            plots.thrust.display(),
-            plots.solver_time.display()
-        );
+        println!("wrote {}", side.display());
     }
     Ok(())
 }
