@@ -270,7 +270,7 @@ impl Session {
                 self.armed = armed;
                 self.px4_mode = Some(mode);
             }
-            Inbound::Odometry(_) => self.last_odometry = Some(now),
+            Inbound::Odometry(_) => self.on_odometry(now),
             Inbound::Ack {
                 command,
                 accepted,
@@ -297,6 +297,12 @@ impl Session {
             }
             _ => {}
         }
+    }
+
+    /// A new state of the vehicle arrived at `now` (ODOMETRY, or what the caller made of
+    /// LOCAL_POSITION_NED + ATTITUDE_QUATERNION): the odometry failsafe's clock.
+    pub fn on_odometry(&mut self, now: f64) {
+        self.last_odometry = Some(now);
     }
 
     /// The result of one solver step (call once per controller step while flying).

@@ -592,7 +592,7 @@ impl Pilot {
                     .session
                     .get_or_insert_with(|| Session::new(self.cfg.link, now));
                 // The session's odometry clock: only accepted (newer) states count.
-                session.on_inbound(&inbound_odometry(), now);
+                session.on_odometry(now);
             }
             self.log_state(&s);
             return;
@@ -944,16 +944,6 @@ impl Pilot {
     pub fn samples(&self) -> &[Sample] {
         self.flight.as_ref().map_or(&[], |f| &f.samples)
     }
-}
-
-fn inbound_odometry() -> Inbound {
-    Inbound::Odometry(messages::OdometryNed {
-        time_us: 0,
-        position: [0.0; 3],
-        velocity: [0.0; 3],
-        q: [1.0, 0.0, 0.0, 0.0],
-        rates: [0.0; 3],
-    })
 }
 
 fn failsafe_mode(f: Failsafe) -> &'static str {
