@@ -4,19 +4,27 @@
 //! `valgrind --tool=callgrind target/release/examples/qrbench_loop`
 //!
 //! It prints the number of steps, the mean QP iterations and the final position error.
-//! Environment: `COLD=1` starts every QP cold, `TOL=1e-6` loosens the QP tolerances.
+//! Environment: `COLD=1` starts every QP cold, `TOL=1e-6` loosens the QP tolerances,
+//! `METHOD=riccati` or `METHOD=condensed` forces how the QPs are solved (default: the solver's
+//! automatic choice, with storage for condensing).
 
 #[allow(dead_code)]
 #[path = "../tests/support/quadrotor.rs"]
 mod quadrotor;
 
-use mpc_runtime::RtiStatus;
+use mpc_runtime::{QpMethod, RtiStatus};
 use nalgebra::SVector;
-use quadrotor::{X0, plant, qrbench};
+use quadrotor::{X0, plant, qrbench_in};
 
 fn main() {
     let dt = 0.04;
-    let mut s = qrbench::<10>(dt);
+    let mut s = qrbench_in::<f64, 10, 10>(dt);
+    s.settings.qp.method = match std::env::var("METHOD").as_deref() {
+        Ok("riccati") => QpMethod::Riccati,
+        Ok("condensed") => QpMethod::Condensed,
+        Ok(other) => panic!("METHOD={other}: expected riccati or condensed"),
+        Err(_) => QpMethod::Auto,
+    };
     // Multipliers of the previous control step's QP as the start of the next (the default;
     // COLD=1 turns it off). TOL=1e-6 sets the QP tolerances (complementarity 100x tighter).
     s.settings.qp.warm_start_dual = std::env::var_os("COLD").is_none();

@@ -45,6 +45,70 @@ pub(crate) fn tr_mul<T: Real, const K: usize, const R: usize, const C: usize>(
     SMatrix::from_array_storage(nalgebra::ArrayStorage(out))
 }
 
+/// `a * b'`.
+#[inline(always)]
+pub(crate) fn mul_tr<T: Real, const R: usize, const K: usize, const C: usize>(
+    a: &SMatrix<T, R, K>,
+    b: &SMatrix<T, C, K>,
+) -> SMatrix<T, R, C> {
+    let (ad, bd) = (&a.data.0, &b.data.0);
+    let mut out = [[T::ZERO; R]; C];
+    for j in 0..C {
+        for k in 0..K {
+            let bjk = bd[k][j];
+            for i in 0..R {
+                out[j][i] += ad[k][i] * bjk;
+            }
+        }
+    }
+    SMatrix::from_array_storage(nalgebra::ArrayStorage(out))
+}
+
+/// `acc -= sum_k a_k b_k'` over the pairs of blocks of `a` and `b`.
+#[inline(always)]
+pub(crate) fn sub_mul_tr_sum<T: Real, const R: usize, const K: usize, const C: usize>(
+    acc: &mut SMatrix<T, R, C>,
+    a: &[SMatrix<T, R, K>],
+    b: &[SMatrix<T, C, K>],
+) {
+    let mut out = acc.data.0;
+    for (am, bm) in a.iter().zip(b) {
+        let (ad, bd) = (&am.data.0, &bm.data.0);
+        for k in 0..K {
+            for j in 0..C {
+                let bjk = bd[k][j];
+                for i in 0..R {
+                    out[j][i] -= ad[k][i] * bjk;
+                }
+            }
+        }
+    }
+    acc.data.0 = out;
+}
+
+/// `acc += sign * sum_k a_k v_k` over the pairs of blocks of `a` and vectors of `v`.
+#[inline(always)]
+pub(crate) fn add_mul_sum<T: Real, const R: usize, const K: usize>(
+    acc: &mut SMatrix<T, R, 1>,
+    sign: T,
+    a: &[SMatrix<T, R, K>],
+    v: &[SMatrix<T, K, 1>],
+) {
+    let mut out = [T::ZERO; R];
+    for (am, vm) in a.iter().zip(v) {
+        let (ad, vd) = (&am.data.0, &vm.data.0[0]);
+        for k in 0..K {
+            let vk = vd[k];
+            for i in 0..R {
+                out[i] += ad[k][i] * vk;
+            }
+        }
+    }
+    for i in 0..R {
+        acc[i] += sign * out[i];
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -56,6 +120,21 @@ mod tests {
         let c = SMatrix::<f64, 3, 2>::from_fn(|i, j| (i + 2 * j) as f64 * 1.3 - 0.5);
         assert!((mul(&a, &b) - a * b).amax() < 1e-12);
         assert!((tr_mul(&a, &c) - a.transpose() * c).amax() < 1e-12);
+        let d = SMatrix::<f64, 2, 4>::from_fn(|i, j| (3 * i + j) as f64 * 0.7 - 1.1);
+        assert!((mul_tr(&a, &d) - a * d.transpose()).amax() < 1e-12);
+        let (a2, d2) = (a * 0.5 + SMatrix::repeat(0.1), d * -1.5);
+        let mut acc = SMatrix::<f64, 3, 2>::repeat(2.0);
+        sub_mul_tr_sum(&mut acc, &[a, a2], &[d, d2]);
+        let expect = SMatrix::<f64, 3, 2>::repeat(2.0) - a * d.transpose() - a2 * d2.transpose();
+        assert!((acc - expect).amax() < 1e-12);
+        let (v1, v2) = (
+            SMatrix::<f64, 4, 1>::new(1.0, -2.0, 0.5, 3.0),
+            SMatrix::repeat(0.25),
+        );
+        let mut acc = SMatrix::<f64, 3, 1>::new(1.0, 2.0, 3.0);
+        add_mul_sum(&mut acc, -1.0, &[a, a2], &[v1, v2]);
+        let expect = SMatrix::<f64, 3, 1>::new(1.0, 2.0, 3.0) - a * v1 - a2 * v2;
+        assert!((acc - expect).amax() < 1e-12);
         assert_eq!(mul(&SMatrix::<f64, 0, 4>::zeros(), &b).shape(), (0, 2));
     }
 }

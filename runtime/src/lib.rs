@@ -33,7 +33,9 @@ pub mod rti;
 
 pub use model::Model;
 pub use nalgebra;
-pub use qp::{OcpQp, QpInfo, QpSettings, QpSolution, QpSolver, QpStage, QpStatus, QpTerminal};
+pub use qp::{
+    OcpQp, QpInfo, QpMethod, QpSettings, QpSolution, QpSolver, QpStage, QpStatus, QpTerminal,
+};
 pub use real::Real;
 pub use rti::{Rti, RtiInfo, RtiSettings, RtiStatus, SetError};
 

@@ -39,6 +39,8 @@ use crate::kernels::{mul, tr_mul};
 use crate::real::Real;
 use crate::rows::{BoundError, Rhs, Rows, Soft};
 
+mod condense;
+
 type Mat<T, const R: usize, const C: usize> = SMatrix<T, R, C>;
 type Vect<T, const R: usize> = SVector<T, R>;
 
@@ -227,6 +229,32 @@ pub struct QpSettings<T> {
     /// not a factorization); recovers accuracy the Riccati matrices lose to large barrier
     /// terms, which matters in `f32`.
     pub refine: u32,
+    /// How the Newton systems are solved: Riccati recursion or condensing (see [`QpMethod`]).
+    pub method: QpMethod,
+}
+
+/// How [`QpSolver`] solves its Newton systems.
+///
+/// Condensing eliminates the states through the dynamics once per QP, in
+/// [`QpSolver::prepare`] (it does not depend on `x0`): what is left is a dense QP in the
+/// `N * NU` controls with box bounds, whose Newton systems are one dense Cholesky
+/// factorization each, `O((N NU)^3)` against the Riccati recursion's `O(N (NX + NU)^3)`.
+/// For short horizons with few controls (QR-bench: `N = 10`, `NU = 4`) that is several times
+/// cheaper per iteration, and the feedback phase does no work on states until the solution
+/// is known. It applies when the solver has condensing storage (`NC = N`) and the QP has no
+/// state bounds (beyond stage 0, which `x0` fixes) and no general constraints; otherwise the
+/// Riccati recursion is used whatever the setting.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(C)]
+pub enum QpMethod {
+    /// Condensing when it applies and its estimated cost per iteration,
+    /// `(N NU)^3 / 6`, is at most the Riccati recursion's `N (2 NX^3 + 3 NX^2 NU)`;
+    /// the Riccati recursion otherwise.
+    Auto = 0,
+    /// Always the Riccati recursion.
+    Riccati = 1,
+    /// Condensing whenever it applies.
+    Condensed = 2,
 }
 
 impl<T: Real> QpSettings<T> {
@@ -242,6 +270,7 @@ impl<T: Real> QpSettings<T> {
         warm_start_dual: false,
         mu0: T::DEFAULT_MU0,
         refine: T::DEFAULT_REFINE,
+        method: QpMethod::Auto,
     };
 }
 
@@ -326,6 +355,7 @@ pub struct QpSolver<
     const NG: usize,
     const NGN: usize,
     const N: usize,
+    const NC: usize = 0,
 > {
     /// Settings used by [`solve`](Self::solve).
     pub settings: QpSettings<T>,
@@ -369,33 +399,87 @@ pub struct QpSolver<
     last_alpha: T,
     /// The multipliers of the last solve are a solution's (usable for a dual warm start).
     dual_valid: bool,
+    /// The last [`prepare`](Self::prepare) condensed the QP (see [`condense`]).
+    condensed: bool,
+    /// Condensed Hessian blocks `H_ij` (`i >= j`), the Cholesky factor of `H + Sigma`, the
+    /// gradient at `x0 = 0` and its derivative by `x0` (`g = gc + xc' x0`).
+    hc: [[Mat<T, NU, NU>; NC]; NC],
+    lc: [[Mat<T, NU, NU>; NC]; NC],
+    gc: [Vect<T, NU>; NC],
+    xc: [Mat<T, NX, NU>; NC],
 }
 
-impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usize, const N: usize>
-    Default for QpSolver<T, NX, NU, NG, NGN, N>
+impl<
+    T: Real,
+    const NX: usize,
+    const NU: usize,
+    const NG: usize,
+    const NGN: usize,
+    const N: usize,
+    const NC: usize,
+> Default for QpSolver<T, NX, NU, NG, NGN, N, NC>
 {
     fn default() -> Self {
         Self::NEW
     }
 }
 
+/// Cholesky factorization of the symmetric part of `m` plus `reg` on the diagonal; when that
+/// fails, up to three retries with a thousand times more, scaled by each diagonal entry.
+fn regularized_cholesky<T: Real, const K: usize>(
+    m: Mat<T, K, K>,
+    reg: T,
+) -> Option<nalgebra::Cholesky<T, nalgebra::Const<K>>> {
+    let sym = (m + m.transpose()) * T::lit(0.5);
+    let mut reg = reg;
+    for attempt in 0..4 {
+        let mut m = sym;
+        for i in 0..K {
+            // First attempt: the plain regularization. Retries scale it with each diagonal
+            // entry, which rescues the end game, where barrier terms of active bounds dwarf
+            // everything else and rounding breaks definiteness.
+            let d = m[(i, i)];
+            m[(i, i)] = if attempt == 0 {
+                d + reg
+            } else {
+                d + reg * d.abs().max(T::ONE)
+            };
+        }
+        if let Some(chol) = nalgebra::Cholesky::new(m) {
+            return Some(chol);
+        }
+        reg = (reg * T::lit(1e3)).max(T::EPSILON * T::lit(1e3));
+    }
+    None
+}
+
+/// Every entry is finite: `v * 0` is `0` for finite `v` and NaN otherwise, so the sum is `0`
+/// exactly when all are (one branch-free pass; this check runs on every solve's data).
 fn finite_mat<T: Real, const R: usize, const C: usize>(m: &Mat<T, R, C>) -> bool {
-    m.iter().all(|v| v.finite())
+    m.as_slice().iter().fold(T::ZERO, |s, &v| s + v * T::ZERO) == T::ZERO
 }
 
 fn no_nan<T: Real, const R: usize>(v: &Vect<T, R>) -> bool {
-    !v.iter().any(|x| x.nan())
+    !v.as_slice().iter().any(|x| x.nan())
 }
 
 /// Soft-constraint penalties are finite and nonnegative.
 fn penalties_ok<T: Real, const R: usize>(v: &Vect<T, R>) -> bool {
-    v.iter().all(|x| x.finite() && *x >= T::ZERO)
+    v.as_slice().iter().all(|x| x.finite() && *x >= T::ZERO)
 }
 
-impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usize, const N: usize>
-    QpSolver<T, NX, NU, NG, NGN, N>
+impl<
+    T: Real,
+    const NX: usize,
+    const NU: usize,
+    const NG: usize,
+    const NGN: usize,
+    const N: usize,
+    const NC: usize,
+> QpSolver<T, NX, NU, NG, NGN, N, NC>
 {
-    /// A solver with default settings; usable in a `static`.
+    /// A solver with default settings; usable in a `static`. `NC` is `0` (no storage for
+    /// condensing) or `N`; any other value fails to compile.
     pub const NEW: Self = QpSolver {
         settings: QpSettings::DEFAULT,
         sol: QpSolution::NEW,
@@ -429,7 +513,20 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
         pi_new: [crate::zeros(); N],
         last_alpha: T::ZERO,
         dual_valid: false,
+        condensed: {
+            assert!(NC == 0 || NC == N, "NC must be 0 or N");
+            false
+        },
+        hc: [[crate::zeros(); NC]; NC],
+        lc: [[crate::zeros(); NC]; NC],
+        gc: [crate::zeros(); NC],
+        xc: [crate::zeros(); NC],
     };
+
+    /// Whether the last [`prepare`](Self::prepare) condensed the QP (see [`QpMethod`]).
+    pub fn condensed(&self) -> bool {
+        self.condensed
+    }
 
     /// Step length of the last interior-point iteration.
     pub fn last_step_length(&self) -> T {
@@ -526,9 +623,34 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
         }
     }
 
-    /// Solves `qp`. The solution is available from [`solution`](Self::solution) whatever the
-    /// status (for a status other than `Solved` it is the last iterate).
+    /// Solves `qp`: [`prepare`](Self::prepare) then [`solve_prepared`](Self::solve_prepared).
+    /// The solution is available from [`solution`](Self::solution) whatever the status (for a
+    /// status other than `Solved` it is the last iterate).
     pub fn solve(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N>) -> QpInfo<T> {
+        self.prepare(qp);
+        self.solve_prepared(qp)
+    }
+
+    /// The part of a solve that does not depend on `x0`: condenses `qp` when
+    /// [`QpMethod`] says so (nothing to do for the Riccati recursion). A real-time iteration
+    /// calls it in its preparation phase, before the state is measured.
+    pub fn prepare(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N>) {
+        self.condensed = self.condensing_applies(qp) && self.condense(qp);
+    }
+
+    /// Solves `qp` with the work of the last [`prepare`](Self::prepare), which must have been
+    /// given the same QP except for `x0` (anything else may have changed only if the Riccati
+    /// recursion was chosen; [`solve`](Self::solve) is the safe call).
+    pub fn solve_prepared(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N>) -> QpInfo<T> {
+        let info = self.iterate(qp);
+        if self.condensed && info.status != QpStatus::NonFiniteInput {
+            self.expand(qp);
+        }
+        info
+    }
+
+    /// The interior-point iteration.
+    fn iterate(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N>) -> QpInfo<T> {
         let nan = T::ZERO;
         if !self.check_input(qp) {
             return self.info(QpStatus::NonFiniteInput, 0, [nan; 4]);
@@ -588,6 +710,9 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
             self.sgn.init(&mut self.rgn, &gn, floor, mu0);
         }
         self.dual_valid = false;
+        if self.condensed {
+            self.condensed_gradient(qp);
+        }
 
         let st = self.settings;
         let diverge = T::lit(1e12).min(T::ONE / (T::EPSILON * T::EPSILON));
@@ -636,10 +761,19 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
             let sigma = ratio * ratio * ratio;
             // Corrector. Its complementarity target never goes below a tenth of the
             // tolerance: driving slacks further down only buries them in rounding noise
-            // (in f32 that breaks the iteration), and is not needed to stop.
-            let target = (sigma * mu)
-                .max(st.tol_comp * T::lit(0.1))
-                .max(res[0] * T::lit(MU_PER_STATIONARITY));
+            // (in f32 that breaks the iteration), and is not needed to stop. Nor below a
+            // fraction of the stationarity residual, except for a condensed QP: there that
+            // residual holds what the Riccati recursion sees as the dynamics residual (the
+            // change of x0 above all), relative to fewer terms, and the floor only holds
+            // complementarity back while Newton steps remove it (one more iteration per QP
+            // on QR-bench); with control bounds alone the Newton systems stay well
+            // conditioned near the boundary (the random QPs against clarabel).
+            let stat_floor = if self.condensed {
+                T::ZERO
+            } else {
+                res[0] * T::lit(MU_PER_STATIONARITY)
+            };
+            let target = (sigma * mu).max(st.tol_comp * T::lit(0.1)).max(stat_floor);
             // When the predictor is blocked almost at once, its second-order term is a poor
             // prediction and can be huge; leaving it out (plain centering) stops the cycling
             // Mehrotra's method is known for on such steps.
@@ -670,6 +804,12 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
     }
 
     fn max_multiplier(&self) -> T {
+        if self.condensed {
+            return self
+                .ru
+                .iter()
+                .fold(T::ZERO, |m, r| m.max(r.max_multiplier()));
+        }
         let mut m = self
             .rxn
             .max_multiplier()
@@ -693,6 +833,9 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
     /// soft rows' slacks enter the inequality residual, their stationarity `l1 + l2 s - lam -
     /// m` the stationarity residual and `s m` the complementarity.
     fn residuals(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N>) -> [T; 4] {
+        if self.condensed {
+            return self.condensed_residuals();
+        }
         let (mut rs, mut re, mut ri, mut comp) = (T::ZERO, T::ZERO, T::ZERO, T::ZERO);
         let mut gscale = T::ONE;
         let max_abs = |v: &[T]| v.iter().fold(T::ZERO, |m, x| m.max(x.abs()));
@@ -773,6 +916,9 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
         if N == 0 {
             return true;
         }
+        if self.condensed {
+            return self.condensed_factorize();
+        }
         let t = &qp.terminal;
         let sg = self.rgn.sigma(Some(&self.sgn));
         let mut p = t.q
@@ -785,35 +931,12 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
             let dts = s.d.transpose() * sig_g;
             let pa = mul(&p, &s.a);
             let pb = mul(&p, &s.b);
-            let mut rbar = s.r
+            let rbar = s.r
                 + Mat::<T, NU, NU>::from_diagonal(&self.ru[k].sigma(None))
                 + dts * s.d
                 + tr_mul(&s.b, &pb);
             let sbar = s.s + dts * s.c + tr_mul(&s.b, &pa);
-            // Symmetrize, regularize, factorize; more regularization if it fails.
-            rbar = (rbar + rbar.transpose()) * T::lit(0.5);
-            let mut reg = self.settings.reg;
-            let mut chol = None;
-            for attempt in 0..4 {
-                let mut m = rbar;
-                for i in 0..NU {
-                    // First attempt: the plain regularization. Retries scale it with each
-                    // diagonal entry, which rescues the end game, where barrier terms of
-                    // active bounds dwarf everything else and rounding breaks definiteness.
-                    let d = m[(i, i)];
-                    m[(i, i)] = if attempt == 0 {
-                        d + reg
-                    } else {
-                        d + reg * d.abs().max(T::ONE)
-                    };
-                }
-                chol = nalgebra::Cholesky::new(m);
-                if chol.is_some() {
-                    break;
-                }
-                reg = (reg * T::lit(1e3)).max(T::EPSILON * T::lit(1e3));
-            }
-            let Some(chol) = chol else {
+            let Some(chol) = regularized_cholesky(rbar, self.settings.reg) else {
                 return false;
             };
             let kmat = -chol.solve(&sbar);
@@ -848,6 +971,10 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
     /// of iterative refinement, then slack and multiplier directions.
     fn newton_direction(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N>, rhs: Rhs<T>) {
         if N == 0 {
+            return;
+        }
+        if self.condensed {
+            self.condensed_direction(rhs);
             return;
         }
         let t = &qp.terminal;
@@ -955,6 +1082,10 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
     }
 
     fn save_affine(&mut self) {
+        if self.condensed {
+            self.ru.iter_mut().for_each(Rows::save_affine);
+            return;
+        }
         for k in 0..N {
             self.rx[k].save_affine();
             self.ru[k].save_affine();
@@ -967,6 +1098,9 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
     }
 
     fn max_step(&self, mut alpha: T) -> T {
+        if self.condensed {
+            return self.ru.iter().fold(alpha, |a, r| r.max_step(a));
+        }
         for k in 0..N {
             alpha = self.rx[k].max_step(alpha);
             alpha = self.ru[k].max_step(alpha);
@@ -979,6 +1113,12 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
     }
 
     fn complementarity_after(&self, alpha: T) -> T {
+        if self.condensed {
+            return self
+                .ru
+                .iter()
+                .fold(T::ZERO, |s, r| s + r.complementarity_after(alpha));
+        }
         let mut s = self.rxn.complementarity_after(alpha)
             + self.rgn.complementarity_after(alpha)
             + self.sgn.complementarity_after(alpha);
@@ -992,6 +1132,15 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
     }
 
     fn take_step(&mut self, alpha: T) {
+        if self.condensed {
+            // Only the controls and their bounds: states and dynamics multipliers follow
+            // from them at the end (`expand`).
+            for k in 0..N {
+                self.sol.u[k] += self.du[k] * alpha;
+                self.ru[k].update(alpha);
+            }
+            return;
+        }
         for k in 0..N {
             if k > 0 {
                 self.sol.x[k] += self.dx[k] * alpha;

@@ -110,13 +110,14 @@ pub struct Rti<
     const NG: usize,
     const NGN: usize,
     const N: usize,
+    const NC: usize = 0,
 > {
     /// The model.
     pub model: M,
     /// Settings.
     pub settings: RtiSettings<T>,
     qp: OcpQp<T, NX, NU, NG, NGN, N>,
-    solver: QpSolver<T, NX, NU, NG, NGN, N>,
+    solver: QpSolver<T, NX, NU, NG, NGN, N, NC>,
     x: [SVector<T, NX>; N],
     xn: SVector<T, NX>,
     u: [SVector<T, NU>; N],
@@ -224,7 +225,8 @@ impl<
     const NG: usize,
     const NGN: usize,
     const N: usize,
-> Rti<T, M, NX, NU, NP, NY, NYN, NG, NGN, N>
+    const NC: usize,
+> Rti<T, M, NX, NU, NP, NY, NYN, NG, NGN, N, NC>
 {
     /// A solver with zero trajectory, parameters, references and weights and no bounds.
     /// `const`, so it can initialize a `static`.
@@ -433,6 +435,11 @@ impl<
         Ok(())
     }
 
+    /// Whether the last preparation condensed the QP ([`QpMethod`](crate::QpMethod)).
+    pub fn condensed(&self) -> bool {
+        self.solver.condensed()
+    }
+
     /// The QP of the last preparation (for inspection, export and benchmarks).
     pub fn qp(&self) -> &OcpQp<T, NX, NU, NG, NGN, N> {
         &self.qp
@@ -474,6 +481,8 @@ impl<
         }
         self.pending_shift = false;
         self.linearize();
+        self.solver.settings = self.settings.qp;
+        self.solver.prepare(&self.qp);
         self.prepared = true;
     }
 
@@ -557,8 +566,9 @@ impl<
         self.prepared = false;
         let x_lin0 = self.x.first().copied().unwrap_or(*x0);
         self.qp.x0 = x0 - x_lin0;
+        // Settings changed since the preparation apply (the method was chosen there).
         self.solver.settings = self.settings.qp;
-        let qp_info = self.solver.solve(&self.qp);
+        let qp_info = self.solver.solve_prepared(&self.qp);
         if qp_info.status == QpStatus::Solved && self.step_is_finite() {
             self.apply_step(T::ONE);
             if let Some(x) = self.x.first_mut() {

@@ -5,7 +5,7 @@
 
 mod support;
 
-use mpc_runtime::{OcpQp, QpSolver, QpStatus};
+use mpc_runtime::{OcpQp, QpMethod, QpSolver, QpStatus};
 use nalgebra::{SMatrix, SVector};
 use proptest::prelude::*;
 use support::{Reference, clarabel_solve, random_qp, random_soft_qp};
@@ -69,6 +69,58 @@ macro_rules! against_clarabel {
         }
     };
 }
+
+/// Condensing: random QPs with control bounds only (the states' bounds of [`random_qp`]
+/// removed, no general rows), solved condensed, against clarabel to 1e-7 like the Riccati
+/// recursion, and with the dynamics multipliers (recovered after the condensed solve) equal
+/// to the Riccati recursion's on the same QP.
+macro_rules! condensed_against_clarabel {
+    ($name:ident, $nx:literal, $nu:literal, $n:literal) => {
+        proptest! {
+            #![proptest_config(ProptestConfig { cases: 12, ..ProptestConfig::default() })]
+            #[test]
+            fn $name(seed in any::<u64>()) {
+                let mut qp = random_qp::<$nx, $nu, 0, 0, $n>(seed);
+                for s in qp.stages.iter_mut() {
+                    s.lbx.fill(-f64::INFINITY);
+                    s.ubx.fill(f64::INFINITY);
+                }
+                qp.terminal.lbx.fill(-f64::INFINITY);
+                qp.terminal.ubx.fill(f64::INFINITY);
+                let reference = clarabel_solve(&qp);
+                prop_assume!(reference.is_some(), "clarabel found no reference solution");
+                let reference = reference.unwrap();
+                prop_assume!(reference.strict_complementarity > 1e-3, "nearly degenerate solution");
+                let mut solver = Box::new(QpSolver::<f64, $nx, $nu, 0, 0, $n, $n>::NEW);
+                solver.settings.method = QpMethod::Condensed;
+                solver.settings.tol_stat = 1e-10;
+                solver.settings.tol_comp = 1e-12;
+                let info = solver.solve(&qp);
+                prop_assert!(solver.condensed(), "the QP was not condensed");
+                prop_assert_eq!(info.status, QpStatus::Solved, "{:?}", info);
+                let st = solver.settings;
+                prop_assert!(info.res_stat <= st.tol_stat && info.res_eq <= st.tol_eq
+                    && info.res_ineq <= st.tol_ineq && info.mu <= st.tol_comp, "{:?}", info);
+                let sol = solver.solution();
+                let xs: Vec<_> = (0..=$n).map(|k| *sol.state(k).unwrap()).collect();
+                let err = compare(&reference, &sol.u, &xs);
+                prop_assert!(err <= 1e-7, "condensed differs from clarabel by {err:e} (relative)");
+                let mut riccati = Box::new(QpSolver::<f64, $nx, $nu, 0, 0, $n>::NEW);
+                riccati.settings = solver.settings;
+                prop_assert_eq!(riccati.solve(&qp).status, QpStatus::Solved);
+                prop_assert!(!riccati.condensed());
+                let pi_scale = riccati.solution().pi.iter().fold(1.0f64, |m, p| m.max(p.amax()));
+                let dpi = sol.pi.iter().zip(&riccati.solution().pi)
+                    .fold(0.0f64, |m, (a, b)| m.max((a - b).amax()));
+                prop_assert!(dpi <= 1e-6 * pi_scale, "multipliers differ by {dpi:e}");
+            }
+        }
+    };
+}
+
+condensed_against_clarabel!(condensed_n5, 2, 1, 5);
+condensed_against_clarabel!(condensed_qrbench_sized_n10, 10, 4, 10);
+condensed_against_clarabel!(condensed_n20, 6, 3, 20);
 
 against_clarabel!(small_n5, 2, 1, 1, 0, 5);
 against_clarabel!(medium_n10, 4, 2, 2, 1, 10);

@@ -3,9 +3,9 @@
 
 mod support;
 
-use mpc_runtime::RtiStatus;
+use mpc_runtime::{QpMethod, RtiStatus};
 use nalgebra::SVector;
-use support::quadrotor::{NU, NX, X0, plant, qrbench};
+use support::quadrotor::{NU, NX, X0, plant, qrbench, qrbench_in};
 
 /// Rows of an anchor CSV: state (10) and control (4, absent in the last row).
 fn anchor(name: &str) -> Vec<(SVector<f64, NX>, Option<SVector<f64, NU>>)> {
@@ -24,10 +24,21 @@ fn anchor(name: &str) -> Vec<(SVector<f64, NX>, Option<SVector<f64, NU>>)> {
 }
 
 /// Runs the closed loop and compares it with the anchor row by row. Returns the final state.
-fn closed_loop<const N: usize>(dt: f64, steps: usize, csv: &str) -> SVector<f64, NX> {
+/// `NC = N` with `method` `Condensed` solves every QP condensed, `NC = 0` with the Riccati
+/// recursion.
+fn closed_loop<const N: usize, const NC: usize>(
+    dt: f64,
+    steps: usize,
+    csv: &str,
+) -> SVector<f64, NX> {
     let rows = anchor(csv);
     assert_eq!(rows.len(), steps + 1);
-    let mut s = qrbench::<N>(dt);
+    let mut s = qrbench_in::<f64, N, NC>(dt);
+    s.settings.qp.method = if NC == N {
+        QpMethod::Condensed
+    } else {
+        QpMethod::Riccati
+    };
     let mut x = SVector::from(X0);
     let mut worst = 0.0f64;
     for (k, (ax, au)) in rows.iter().enumerate() {
@@ -52,18 +63,32 @@ fn closed_loop<const N: usize>(dt: f64, steps: usize, csv: &str) -> SVector<f64,
     x
 }
 
+fn position_error(x: &SVector<f64, NX>) -> f64 {
+    ((x[0] - 4.0).powi(2) + x[1].powi(2) + (x[2] - 2.0).powi(2)).sqrt()
+}
+
 #[test]
 fn config_a_matches_acados_closed_loop() {
-    let x = closed_loop::<10>(0.04, 100, "acados_qrbench_A.csv");
-    let err = ((x[0] - 4.0).powi(2) + x[1].powi(2) + (x[2] - 2.0).powi(2)).sqrt();
-    assert!(err < 0.05, "final position error {err}");
+    let x = closed_loop::<10, 0>(0.04, 100, "acados_qrbench_A.csv");
+    assert!(position_error(&x) < 0.05, "final position error {x}");
 }
 
 #[test]
 fn config_b_matches_acados_closed_loop() {
-    let x = closed_loop::<20>(0.05, 80, "acados_qrbench_B.csv");
-    let err = ((x[0] - 4.0).powi(2) + x[1].powi(2) + (x[2] - 2.0).powi(2)).sqrt();
-    assert!(err < 0.05, "final position error {err}");
+    let x = closed_loop::<20, 0>(0.05, 80, "acados_qrbench_B.csv");
+    assert!(position_error(&x) < 0.05, "final position error {x}");
+}
+
+#[test]
+fn config_a_condensed_matches_acados_closed_loop() {
+    let x = closed_loop::<10, 10>(0.04, 100, "acados_qrbench_A.csv");
+    assert!(position_error(&x) < 0.05, "final position error {x}");
+}
+
+#[test]
+fn config_b_condensed_matches_acados_closed_loop() {
+    let x = closed_loop::<20, 20>(0.05, 80, "acados_qrbench_B.csv");
+    assert!(position_error(&x) < 0.05, "final position error {x}");
 }
 
 /// The real-time iteration (one Gauss-Newton step per control step, trajectory shifted) tracks
@@ -108,7 +133,7 @@ fn rti_tracks_converged_sqp() {
 #[test]
 fn config_a_in_f32_follows_f64() {
     let dt = 0.04;
-    let mut s32 = support::quadrotor::qrbench_in::<f32, 10>(dt);
+    let mut s32 = qrbench_in::<f32, 10, 0>(dt);
     let mut s64 = qrbench::<10>(dt);
     let (mut x32, mut x64) = (SVector::from(X0), SVector::from(X0));
     for k in 0..100 {

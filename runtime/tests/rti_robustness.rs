@@ -7,7 +7,7 @@ mod support;
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
-use mpc_runtime::{Model, Real, Rti, RtiStatus, SetError};
+use mpc_runtime::{Model, QpMethod, Real, Rti, RtiStatus, SetError};
 use nalgebra::{SMatrix, SVector};
 
 /// Counts allocations made on the thread that armed it (other test threads do not count).
@@ -103,10 +103,15 @@ impl<T: Real> Model<T, 2, 1, 0, 3, 2, 1, 0> for DoubleIntegrator {
     }
 }
 
-type Di = Rti<f64, DoubleIntegrator, 2, 1, 0, 3, 2, 1, 0, 15>;
+/// With storage for condensing; [`di`] sets the method.
+type Di = Rti<f64, DoubleIntegrator, 2, 1, 0, 3, 2, 1, 0, 15, 15>;
 
-fn di() -> Box<Di> {
+/// Both ways of solving the QPs: each test below runs with both.
+const METHODS: [QpMethod; 2] = [QpMethod::Riccati, QpMethod::Condensed];
+
+fn di(method: QpMethod) -> Box<Di> {
     let mut s = Box::new(Di::new(DoubleIntegrator { dt: 0.1 }));
+    s.settings.qp.method = method;
     let w = SMatrix::<f64, 3, 3>::from_diagonal(&SVector::from([10.0, 1.0, 0.1]));
     s.set_weights(&w, &(SMatrix::identity() * 10.0)).unwrap();
     s.set_bounds(
@@ -138,8 +143,14 @@ fn step(s: &mut Di, x: &SVector<f64, 2>) -> SVector<f64, 2> {
 
 #[test]
 fn non_finite_inputs_are_rejected_and_leave_no_trace() {
-    let mut clean = di();
-    let mut dirty = di();
+    for method in METHODS {
+        non_finite_inputs_with(method);
+    }
+}
+
+fn non_finite_inputs_with(method: QpMethod) {
+    let mut clean = di(method);
+    let mut dirty = di(method);
     let mut x = SVector::from([2.0, 0.0]);
     let mut xd = x;
     for k in 0..20 {
@@ -173,21 +184,31 @@ fn non_finite_inputs_are_rejected_and_leave_no_trace() {
         }
         x = step(&mut clean, &x);
         xd = step(&mut dirty, &xd);
+        assert_eq!(clean.condensed(), method == QpMethod::Condensed);
         assert_eq!(
             x, xd,
-            "step {k}: the refused inputs changed the closed loop"
+            "{method:?} step {k}: the refused inputs changed the closed loop"
         );
     }
 }
 
 #[test]
 fn failing_qp_returns_the_previous_plan_shifted() {
-    let mut s = di();
+    for method in METHODS {
+        failing_qp_with(method);
+    }
+}
+
+/// With `Condensed`, the QPs are condensed until the constraint appears, then solved by the
+/// Riccati recursion (a general row cannot be condensed), which finds them infeasible.
+fn failing_qp_with(method: QpMethod) {
+    let mut s = di(method);
     let mut x = SVector::from([2.0, 0.0]);
     for _ in 0..5 {
         x = step(&mut s, &x);
     }
     s.prepare();
+    assert_eq!(s.condensed(), method == QpMethod::Condensed);
     let (_, info) = s.feedback(&x);
     assert_eq!(info.status, RtiStatus::Ok);
     let plan: Vec<f64> = (0..15).map(|k| s.control(k).unwrap()[0]).collect();
@@ -201,6 +222,7 @@ fn failing_qp_returns_the_previous_plan_shifted() {
     .unwrap();
     for (age, planned) in plan.iter().enumerate().take(4).skip(1) {
         s.prepare();
+        assert!(!s.condensed());
         let (u, info) = s.feedback(&x);
         assert_eq!(info.status, RtiStatus::UsedPreviousPlan, "{info:?}");
         assert_eq!(
@@ -212,9 +234,10 @@ fn failing_qp_returns_the_previous_plan_shifted() {
     }
 }
 
-/// `di()` with the soft constraint `p + v >= 0.5` (L1 penalty 50, L2 penalty 10).
+/// `di` with the soft constraint `p + v >= 0.5` (L1 penalty 50, L2 penalty 10): never
+/// condensed (a general row), though condensing is asked for.
 fn di_soft() -> Box<Di> {
-    let mut s = di();
+    let mut s = di(QpMethod::Condensed);
     s.set_constraint_bounds(
         &SVector::from([0.5]),
         &SVector::from([f64::INFINITY]),
@@ -276,6 +299,7 @@ fn soft_constraint_violated_at_start_keeps_the_loop_running() {
     let mut x = SVector::from([-1.0, 0.0]);
     for k in 0..80 {
         s.prepare();
+        assert!(!s.condensed());
         let (u, info) = s.feedback(&x);
         assert_eq!(info.status, RtiStatus::Ok, "step {k}: {info:?}");
         let mut a = SMatrix::zeros();
@@ -382,19 +406,25 @@ fn full_sqp_merit_includes_the_soft_penalties() {
 
 #[test]
 fn prepare_feedback_and_sqp_do_not_allocate() {
-    let mut s = di();
-    let x = SVector::from([2.0, 0.0]);
-    // Warm up once (nothing in the solver allocates, but the test harness might lazily).
-    s.prepare();
-    let _ = s.feedback(&x);
-    let (_, n) = count_allocations(|| {
-        for _ in 0..10 {
-            s.prepare();
-            let _ = s.feedback(&x);
-        }
-        s.solve_sqp(&x)
-    });
-    assert_eq!(n, 0, "allocations during prepare/feedback/solve_sqp");
+    for method in METHODS {
+        let mut s = di(method);
+        let x = SVector::from([2.0, 0.0]);
+        // Warm up once (nothing in the solver allocates, but the test harness might lazily).
+        s.prepare();
+        let _ = s.feedback(&x);
+        let (_, n) = count_allocations(|| {
+            for _ in 0..10 {
+                s.prepare();
+                let _ = s.feedback(&x);
+            }
+            s.solve_sqp(&x)
+        });
+        assert_eq!(s.condensed(), method == QpMethod::Condensed);
+        assert_eq!(
+            n, 0,
+            "allocations during prepare/feedback/solve_sqp ({method:?})"
+        );
+    }
     // With a soft row violated at the start (slacks active, merit with penalties).
     let mut s = di_soft();
     let x = SVector::from([-1.0, 0.0]);
@@ -424,11 +454,16 @@ fn prepare_feedback_and_sqp_do_not_allocate() {
         0,
         0,
         10,
+        10,
     >::new(support::quadrotor::Quadrotor { dt: 0.04 }));
     let x0 = SVector::<f32, 10>::from_fn(|i, _| support::quadrotor::X0[i] as f32);
-    let (_, n) = count_allocations(|| {
-        q.prepare();
-        q.feedback(&x0)
-    });
-    assert_eq!(n, 0);
+    for method in METHODS {
+        q.settings.qp.method = method;
+        let (_, n) = count_allocations(|| {
+            q.prepare();
+            q.feedback(&x0)
+        });
+        assert_eq!(q.condensed(), method == QpMethod::Condensed);
+        assert_eq!(n, 0, "f32 quadrotor, {method:?}");
+    }
 }

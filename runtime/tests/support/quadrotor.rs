@@ -169,19 +169,21 @@ pub const X0: [f64; NX] = [0.0, 0.0, 2.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
 pub const U_LO: [f64; NU] = [0.0, -20.0, -20.0, -6.0];
 pub const U_HI: [f64; NU] = [20.0, 20.0, 20.0, 6.0];
 
-/// The RTI solver of QR-bench with horizon `N`, in precision `T`.
-pub type QrSolver<T, const N: usize> = Rti<T, Quadrotor<T>, NX, NU, 0, NY, NX, 0, 0, N>;
+/// The RTI solver of QR-bench with horizon `N`, in precision `T`; `NC = N` gives it storage
+/// for condensing (`NC = 0`: the Riccati recursion only).
+pub type QrSolver<T, const N: usize, const NC: usize = 0> =
+    Rti<T, Quadrotor<T>, NX, NU, 0, NY, NX, 0, 0, N, NC>;
 
-/// A QR-bench solver in `f64`; see [`qrbench_in`].
+/// A QR-bench solver in `f64` (Riccati recursion); see [`qrbench_in`].
 pub fn qrbench<const N: usize>(dt: f64) -> Box<QrSolver<f64, N>> {
-    qrbench_in::<f64, N>(dt)
+    qrbench_in::<f64, N, 0>(dt)
 }
 
 /// A QR-bench solver: weights `W = diag(Q, R)`, `W_N = 5 Q`, the hover reference at (4, 0, 2)
 /// on every stage, the control bounds, and the first guess `x_k = x0`, `u_k = 0`.
-pub fn qrbench_in<T: Real, const N: usize>(dt: f64) -> Box<QrSolver<T, N>> {
+pub fn qrbench_in<T: Real, const N: usize, const NC: usize>(dt: f64) -> Box<QrSolver<T, N, NC>> {
     let c = |v: f64| T::lit(v);
-    let mut s = Box::new(QrSolver::<T, N>::new(Quadrotor { dt: c(dt) }));
+    let mut s = Box::new(QrSolver::<T, N, NC>::new(Quadrotor { dt: c(dt) }));
     let mut w = SMatrix::<T, NY, NY>::zeros();
     let mut wn = SMatrix::<T, NX, NX>::zeros();
     for (i, q) in q_diag().iter().enumerate() {

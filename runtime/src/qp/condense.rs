@@ -1,0 +1,282 @@
+//! Full condensing: the states are eliminated through the dynamics, leaving a dense QP in the
+//! controls `u = (u_0, ..., u_{N-1})`,
+//!
+//! ```text
+//! min 1/2 u'H u + (gc + xc' x0)' u   s.t.  lbu_k <= u_k <= ubu_k,
+//! ```
+//!
+//! solved by the same interior-point iteration, whose Newton systems are then one dense block
+//! Cholesky factorization of `H + Sigma` each. `H`, `gc` and `xc` depend on the stage data
+//! only, so they are built in [`QpSolver::prepare`], before `x0` is known.
+//!
+//! `H` comes from a backward recursion over the tail cost `T_k(x_k, u_k, ..., u_{N-1})`, the
+//! cost from stage `k` on with the dynamics substituted. Its Hessian by `x_k` is `P_k`, its
+//! cross term with `u_j` is `X_{k,j}`, its gradient by `x_k` is `p_k`; with
+//! `x_{k+1} = A x_k + B u_k + f` (stage `k`'s data):
+//!
+//! ```text
+//! P_N = Q_N,  p_N = gx_N
+//! H_kk = R_k + B'P_{k+1}B,        H_jk = X_{k+1,j}'B          (j > k)
+//! X_kk = S_k' + A'P_{k+1}B,       X_kj = A'X_{k+1,j}          (j > k)
+//! gc_k = gu_k + B'(p_{k+1} + P_{k+1} f),   gc_j += X_{k+1,j}'f   (j > k)
+//! p_k = gx_k + A'(p_{k+1} + P_{k+1} f),    P_k = Q_k + A'P_{k+1}A
+//! ```
+//!
+//! and `xc_j = X_{0,j}`. That is `O(N^2 NX^2 NU + N NX^3)` once per QP. After the iteration
+//! the states follow from the dynamics and the dynamics multipliers from the state
+//! stationarity conditions (there are no state bounds), backwards.
+
+use super::{Mat, OcpQp, QpMethod, QpSolver, Vect, regularized_cholesky};
+use crate::kernels::{add_mul_sum, mul, mul_tr, sub_mul_tr_sum, tr_mul};
+use crate::real::Real;
+use crate::rows::Rhs;
+
+impl<
+    T: Real,
+    const NX: usize,
+    const NU: usize,
+    const NG: usize,
+    const NGN: usize,
+    const N: usize,
+    const NC: usize,
+> QpSolver<T, NX, NU, NG, NGN, N, NC>
+{
+    /// Whether the next solve of `qp` condenses: storage for it (`NC = N`), the method, and
+    /// no inequality other than control bounds.
+    pub(super) fn condensing_applies(&self, qp: &OcpQp<T, NX, NU, NG, NGN, N>) -> bool {
+        if NC != N || N == 0 {
+            return false;
+        }
+        match self.settings.method {
+            QpMethod::Riccati => return false,
+            QpMethod::Condensed => {}
+            QpMethod::Auto => {
+                let (n, nx, nu) = ((N * NU) as f64, NX as f64, NU as f64);
+                let dense = n * n * n / 6.0;
+                let riccati = N as f64 * (2.0 * nx * nx * nx + 3.0 * nx * nx * nu);
+                if dense > riccati {
+                    return false;
+                }
+            }
+        }
+        fn free<T: Real, const K: usize>(lo: &Vect<T, K>, hi: &Vect<T, K>) -> bool {
+            lo.iter().all(|&l| l <= -T::INF) && hi.iter().all(|&h| h >= T::INF)
+        }
+        let stages = qp
+            .stages
+            .iter()
+            .enumerate()
+            .all(|(k, s)| (k == 0 || free(&s.lbx, &s.ubx)) && free(&s.lg, &s.ug));
+        let t = &qp.terminal;
+        stages && free(&t.lbx, &t.ubx) && free(&t.lg, &t.ug)
+    }
+
+    /// Builds `hc`, `gc`, `xc` (module docs). Returns `false` (and the Riccati recursion is
+    /// used) if `NC != N`.
+    pub(super) fn condense(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N>) -> bool {
+        if NC != N {
+            return false;
+        }
+        let t = &qp.terminal;
+        let mut p = t.q;
+        let mut pv = t.gx;
+        for k in (0..NC).rev() {
+            let Some(s) = qp.stages.get(k) else {
+                return false;
+            };
+            // A' once, so that every product with it is a column-oriented `mul`.
+            let at = s.a.transpose();
+            let pb = mul(&p, &s.b);
+            let pf = pv + mul(&p, &s.f);
+            self.hc[k][k] = s.r + tr_mul(&s.b, &pb);
+            for j in k + 1..NC {
+                self.hc[j][k] = tr_mul(&self.xc[j], &s.b);
+                self.gc[j] += tr_mul(&self.xc[j], &s.f);
+                self.xc[j] = mul(&at, &self.xc[j]);
+            }
+            self.gc[k] = s.gu + tr_mul(&s.b, &pf);
+            self.xc[k] = s.s.transpose() + mul(&at, &pb);
+            if k > 0 {
+                pv = s.gx + mul(&at, &pf);
+                let pk = s.q + mul(&at, &mul(&p, &s.a));
+                p = (pk + pk.transpose()) * T::lit(0.5);
+            }
+        }
+        true
+    }
+
+    /// The condensed gradient at this `x0`, into `gu0`.
+    pub(super) fn condensed_gradient(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N>) {
+        for k in 0..NC.min(N) {
+            self.gu0[k] = self.gc[k] + tr_mul(&self.xc[k], &qp.x0);
+        }
+    }
+
+    /// `sum_j H_ij v_j` for block row `i` (`H` is stored as its lower block triangle).
+    fn hessian_row(&self, i: usize, v: &[Vect<T, NU>; N]) -> Vect<T, NU> {
+        let mut h = Vect::<T, NU>::zeros();
+        add_mul_sum(&mut h, T::ONE, &self.hc[i][..=i], &v[..=i]);
+        for (hj, vj) in self.hc.iter().zip(v).skip(i + 1) {
+            h += tr_mul(&hj[i], vj);
+        }
+        h
+    }
+
+    /// Residuals of the condensed QP: `[stationarity, 0, inequality, sum t lam]` (the
+    /// dynamics hold by construction), with `H u + g` in `hu`. Stationarity is relative to the
+    /// largest of its terms, `H u`, `g` and the bound multipliers, when that exceeds 1 (as the
+    /// Riccati recursion's is to its terms, of which `H u` and `g` are sums).
+    pub(super) fn condensed_residuals(&mut self) -> [T; 4] {
+        let (mut rs, mut ri, mut comp, mut scale) = (T::ZERO, T::ZERO, T::ZERO, T::ONE);
+        for i in 0..NC.min(N) {
+            let hv = self.hessian_row(i, &self.sol.u);
+            let h = hv + self.gu0[i];
+            self.hu[i] = h;
+            let ud = self.ru[i].dual();
+            rs = rs.max((h - ud).amax());
+            scale = scale.max(hv.amax()).max(self.gu0[i].amax()).max(ud.amax());
+            ri = ri.max(self.ru[i].residuals(&self.sol.u[i], None));
+            comp += self.ru[i].complementarity();
+        }
+        [rs / scale, T::ZERO, ri, comp]
+    }
+
+    /// Block Cholesky factorization `L L' = H + Sigma` into `lc`, each diagonal block
+    /// regularized as in the Riccati recursion. The diagonal blocks are stored inverted
+    /// (`lc[j][j] = L_jj^-1`), so that every later use is a product.
+    pub(super) fn condensed_factorize(&mut self) -> bool {
+        let n = NC.min(N);
+        for j in 0..n {
+            let mut d = self.hc[j][j] + Mat::<T, NU, NU>::from_diagonal(&self.ru[j].sigma(None));
+            let lj = &self.lc[j][..j];
+            sub_mul_tr_sum(&mut d, lj, lj);
+            let Some(chol) = regularized_cholesky(d, self.settings.reg) else {
+                return false;
+            };
+            let inv = lower_inverse(&chol.unpack());
+            if !inv.iter().all(|v| v.finite()) {
+                return false;
+            }
+            for i in j + 1..n {
+                let mut m = self.hc[i][j];
+                sub_mul_tr_sum(&mut m, &self.lc[i][..j], &self.lc[j][..j]);
+                // L_ij L_jj' = M.
+                self.lc[i][j] = mul_tr(&m, &inv);
+            }
+            self.lc[j][j] = inv;
+        }
+        true
+    }
+
+    /// `v <- (L L')^-1 v` with the factor of the last [`condensed_factorize`].
+    fn condensed_solve(&self, v: &mut [Vect<T, NU>; N]) {
+        let n = NC.min(N);
+        for i in 0..n {
+            let mut y = v[i];
+            add_mul_sum(&mut y, -T::ONE, &self.lc[i][..i], &v[..i]);
+            v[i] = mul(&self.lc[i][i], &y);
+        }
+        for i in (0..n).rev() {
+            let mut y = v[i];
+            for (lk, vk) in self.lc.iter().zip(v.iter()).skip(i + 1) {
+                y -= tr_mul(&lk[i], vk);
+            }
+            v[i] = tr_mul(&self.lc[i][i], &y);
+        }
+    }
+
+    /// Newton direction of the condensed QP: `(H + Sigma) du = -(H u + g + bound terms)`,
+    /// with `settings.refine` steps of iterative refinement against `H` itself.
+    pub(super) fn condensed_direction(&mut self, rhs: Rhs<T>) {
+        let n = NC.min(N);
+        let mut sig = [Vect::<T, NU>::zeros(); N];
+        let rows = self
+            .gut
+            .iter_mut()
+            .zip(&mut sig)
+            .zip(&self.ru)
+            .zip(&self.hu);
+        for (((g, sg), r), h) in rows {
+            *g = *h + r.gradient(rhs, None);
+            *sg = r.sigma(None);
+        }
+        let mut du = self.gut;
+        self.condensed_solve(&mut du);
+        for d in du.iter_mut() {
+            *d = -*d;
+        }
+        for _ in 0..self.settings.refine {
+            let mut r = self.gut;
+            for (i, ri) in r.iter_mut().enumerate().take(n) {
+                *ri += self.hessian_row(i, &du) + sig[i].component_mul(&du[i]);
+            }
+            self.condensed_solve(&mut r);
+            for (d, c) in du.iter_mut().zip(&r) {
+                *d -= *c;
+            }
+        }
+        for ((d, r), dk) in self.du.iter_mut().zip(self.ru.iter_mut()).zip(&du) {
+            *d = *dk;
+            r.direction(dk, rhs, None);
+        }
+    }
+
+    /// States from the dynamics and dynamics multipliers from the state stationarity
+    /// conditions, for the controls of the condensed solve.
+    pub(super) fn expand(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N>) {
+        let mut x = qp.x0;
+        for k in 0..N {
+            let s = &qp.stages[k];
+            self.sol.x[k] = x;
+            x = mul(&s.a, &x) + mul(&s.b, &self.sol.u[k]) + s.f;
+        }
+        self.sol.xn = x;
+        let t = &qp.terminal;
+        let mut pi = mul(&t.q, &x) + t.gx;
+        for k in (0..N).rev() {
+            self.sol.pi[k] = pi;
+            if k > 0 {
+                let s = &qp.stages[k];
+                let (xk, uk) = (&self.sol.x[k], &self.sol.u[k]);
+                pi = mul(&s.q, xk) + tr_mul(&s.s, uk) + s.gx + tr_mul(&s.a, &pi);
+            }
+        }
+    }
+}
+
+/// Inverse of a lower-triangular matrix with a nonzero diagonal (a Cholesky factor), by
+/// forward substitution column by column.
+fn lower_inverse<T: Real, const K: usize>(l: &Mat<T, K, K>) -> Mat<T, K, K> {
+    let mut inv = Mat::<T, K, K>::zeros();
+    for j in 0..K {
+        inv[(j, j)] = T::ONE / l[(j, j)];
+        for i in j + 1..K {
+            let mut acc = T::ZERO;
+            for k in j..i {
+                acc += l[(i, k)] * inv[(k, j)];
+            }
+            inv[(i, j)] = -acc / l[(i, i)];
+        }
+    }
+    inv
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn lower_inverse_inverts() {
+        let l = Mat::<f64, 4, 4>::from_fn(|i, j| {
+            if i == j {
+                1.5 + i as f64
+            } else if i > j {
+                0.3 * (i + 2 * j) as f64 - 0.4
+            } else {
+                0.0
+            }
+        });
+        let err = (lower_inverse(&l) * l - Mat::<f64, 4, 4>::identity()).amax();
+        assert!(err < 1e-14, "{err}");
+    }
+}
