@@ -206,6 +206,13 @@ struct SimArgs {
     json: bool,
 }
 
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum QpMethodArg {
+    Auto,
+    Riccati,
+    Condensed,
+}
+
 #[derive(clap::Args)]
 struct BuildArgs {
     /// The `.mpc` file.
@@ -234,6 +241,10 @@ struct BuildArgs {
     /// QP tolerance (stationarity, equality, inequality) baked into the solver.
     #[arg(long)]
     qp_tol: Option<f64>,
+    /// How the QPs are solved: `auto` condenses short horizons with control bounds only
+    /// (dense QP in the controls), `riccati` never, `condensed` whenever the QP allows it.
+    #[arg(long, value_enum, default_value_t = QpMethodArg::Auto)]
+    qp_method: QpMethodArg,
     /// Path of the mpc-runtime crate as written into the generated Cargo.toml, relative to
     /// the output directory (default: this checkout's runtime/, relative to the output).
     #[arg(long)]
@@ -270,7 +281,7 @@ fn default_runtime_path(out: &std::path::Path) -> Option<String> {
 }
 
 fn build(a: &BuildArgs) -> ExitCode {
-    use mpc_codegen::{Options, QpOptions, RuntimeDep, Scalar};
+    use mpc_codegen::{Options, QpMethod, QpOptions, RuntimeDep, Scalar};
     let runtime = match &a.runtime_path {
         Some(p) => RuntimeDep::Path(p.clone()),
         None => match default_runtime_path(&a.out) {
@@ -284,6 +295,11 @@ fn build(a: &BuildArgs) -> ExitCode {
         qp: QpOptions {
             max_iter: a.qp_max_iter,
             tol: a.qp_tol,
+            method: match a.qp_method {
+                QpMethodArg::Auto => None,
+                QpMethodArg::Riccati => Some(QpMethod::Riccati),
+                QpMethodArg::Condensed => Some(QpMethod::Condensed),
+            },
             ..QpOptions::default()
         },
         shift: None,

@@ -104,3 +104,53 @@ fn build_reports_errors_with_file_line_and_column() {
     let (ok, _, err) = mpcc(&["build", "no/such.mpc", "-o", out.to_str().unwrap()]);
     assert!(!ok && err.contains("no/such.mpc"), "{err}");
 }
+
+/// `--qp-method` reaches the generated solver: `condensed` gives QR-bench B condensing storage
+/// and asks for it, `riccati` takes A's away; a bad value is refused with the choices.
+#[test]
+fn build_qp_method_option() {
+    let base = Path::new(env!("CARGO_TARGET_TMPDIR"));
+    for (variant, method, nc) in [(None, "condensed", "20"), (Some("A"), "riccati", "0")] {
+        let dir = base.join(format!("cli_build_qp_method_{method}"));
+        let _ = std::fs::remove_dir_all(&dir);
+        let out = dir.to_str().unwrap();
+        let mut args = vec![
+            "build",
+            "models/quadrotor_rates.mpc",
+            "-o",
+            out,
+            "--qp-method",
+            method,
+        ];
+        if let Some(v) = variant {
+            args.extend(["--variant", v]);
+        }
+        let (ok, _, err) = mpcc(&args);
+        assert!(ok, "{err}");
+        let lib = std::fs::read_to_string(dir.join("src/lib.rs")).unwrap();
+        assert!(
+            lib.contains(&format!("pub const NC: usize = {nc};")),
+            "{method}"
+        );
+        let name = if method == "condensed" {
+            "Condensed"
+        } else {
+            "Riccati"
+        };
+        assert!(lib.contains(&format!("s.qp.method = mpc_runtime::QpMethod::{name};")));
+    }
+    let dir = base.join("cli_build_qp_method_bad");
+    let (ok, _, err) = mpcc(&[
+        "build",
+        "models/quadrotor_rates.mpc",
+        "-o",
+        dir.to_str().unwrap(),
+        "--qp-method",
+        "dense",
+    ]);
+    assert!(!ok);
+    assert!(
+        err.contains("--qp-method") && err.contains("condensed"),
+        "{err}"
+    );
+}

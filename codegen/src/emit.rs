@@ -10,7 +10,7 @@ use mpc_dsl::{Instr, Operand};
 
 use crate::error::CodegenError;
 use crate::lower::{Arg, Function, Lowered, Named, RowBlock, Target};
-use crate::options::{Options, Scalar};
+use crate::options::{Options, QpMethod, Scalar};
 
 /// Which helpers the emitted functions call.
 #[derive(Default)]
@@ -265,6 +265,22 @@ fn doc_lines(text: &str) -> TokenStream {
         quote!(#[doc = #l])
     });
     quote!(#(#lines)*)
+}
+
+/// `NC` of the generated solver: `N` when it is to condense (see
+/// [`QpOptions::method`](crate::QpOptions::method)),
+/// `0` otherwise.
+fn condensing_storage(l: &Lowered, opts: &Options) -> usize {
+    let free = |lo: &[f64], hi: &[f64]| {
+        lo.iter().all(|v| *v == f64::NEG_INFINITY) && hi.iter().all(|v| *v == f64::INFINITY)
+    };
+    let condensable = free(&l.lbx, &l.ubx) && free(&l.lg, &l.ug) && free(&l.lgn, &l.ugn);
+    let wanted = match opts.qp.method.unwrap_or(QpMethod::Auto) {
+        QpMethod::Riccati => false,
+        QpMethod::Condensed => true,
+        QpMethod::Auto => condensable && mpc_runtime::condensing_pays(l.nx, l.nu, l.n),
+    };
+    if wanted { l.n } else { 0 }
 }
 
 /// Upper-case constant name for a model name.
@@ -713,6 +729,12 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
         if let Some(b) = opts.shift {
             fields.push(quote!(s.shift = #b;));
         }
+        if opts.qp.method == Some(QpMethod::Condensed) {
+            fields.push(quote!(s.qp.method = mpc_runtime::QpMethod::Condensed;));
+        }
+        if opts.qp.method == Some(QpMethod::Riccati) {
+            fields.push(quote!(s.qp.method = mpc_runtime::QpMethod::Riccati;));
+        }
         if fields.is_empty() {
             quote!(RtiSettings::DEFAULT)
         } else {
@@ -724,6 +746,7 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
         }
     };
     let n1 = ul(l.n + 1);
+    let nc = ul(condensing_storage(l, opts));
     let model_name = &l.name;
     let solver_doc = doc_lines(&format!(
         "The NMPC solver of `{model_name}`: horizon {n}, {} s per interval, one real-time \
@@ -760,6 +783,9 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
         pub const NGN: usize = #ngn;
         /// Horizon (shooting intervals).
         pub const N: usize = #n;
+        /// Condensing storage of the QP solver: `N` (QPs with control bounds only are
+        /// condensed) or `0` (Riccati recursion only).
+        pub const NC: usize = #nc;
         /// Interval length in seconds.
         pub const DT: Real = #dt;
 
@@ -892,7 +918,7 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
         }
 
         /// The runtime solver this crate instantiates.
-        pub type Rti = mpc_runtime::Rti<Real, Model, NX, NU, NP, NY, NYN, NG, NGN, N>;
+        pub type Rti = mpc_runtime::Rti<Real, Model, NX, NU, NP, NY, NYN, NG, NGN, N, NC>;
 
         const P0: SVector<Real, NP> =
             SVector::from_array_storage(mpc_runtime::nalgebra::ArrayStorage([P_DEFAULT]));

@@ -34,7 +34,7 @@ use sha2::{Digest, Sha256};
 pub use builder::Builder;
 pub use error::CodegenError;
 pub use lower::{Lowered, lower};
-pub use options::{Options, QpOptions, RuntimeDep, Scalar};
+pub use options::{Options, QpMethod, QpOptions, RuntimeDep, Scalar};
 
 /// The generator version written into every stamp.
 pub const VERSION: &str = env!("CARGO_PKG_VERSION");

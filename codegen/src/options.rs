@@ -40,7 +40,15 @@ pub struct QpOptions {
     pub tol_comp: Option<f64>,
     /// Warm start from the previous step's multipliers (the runtime's RTI default is on).
     pub warm_start_dual: Option<bool>,
+    /// How the QPs are solved (`None`: [`QpMethod::Auto`]). `Auto` gives the solver
+    /// condensing storage (`NC = N`) when the model has no state bounds and no general
+    /// constraint with a finite bound, and [`mpc_runtime::condensing_pays`] for its
+    /// dimensions; the runtime then condenses every QP that allows it. `Condensed` always
+    /// gives it the storage and asks for condensing; `Riccati` gives none.
+    pub method: Option<QpMethod>,
 }
+
+pub use mpc_runtime::QpMethod;
 
 /// How the generated `Cargo.toml` refers to `mpc-runtime`.
 #[derive(Clone, Debug, PartialEq, Eq, Hash)]

@@ -8,7 +8,9 @@ mod quadrotor;
 
 use std::path::{Path, PathBuf};
 
-use mpc_codegen::{GeneratedCrate, Options, RuntimeDep, Scalar, with_model_file};
+use mpc_codegen::{
+    GeneratedCrate, Options, QpMethod, QpOptions, RuntimeDep, Scalar, with_model_file,
+};
 use mpc_dsl::{Expr, Graph, Ocp};
 use nalgebra::{DMatrix, DVector, SMatrix, SVector};
 
@@ -114,6 +116,88 @@ fn checked_in_crates_are_current_and_generation_is_deterministic() {
                 .unwrap_or_default()
         );
     }
+}
+
+/// `src/lib.rs` of a generated crate.
+fn lib_rs(g: &GeneratedCrate) -> &str {
+    g.files
+        .iter()
+        .find(|(p, _)| p.ends_with("src/lib.rs"))
+        .map(|(_, c)| c.as_str())
+        .expect("a src/lib.rs")
+}
+
+/// Condensing storage (`NC`) and the method setting follow `QpOptions::method` and the model:
+/// `Auto` gives QR-bench A (N = 10, control bounds only) the storage and B (N = 20, where the
+/// dense factorization would cost more) none, and the point-mass model (state bounds) none;
+/// `Condensed` forces it, `Riccati` removes it.
+#[test]
+fn condensing_storage_follows_the_method_and_the_model() {
+    let cases = [
+        ("models/quadrotor_rates.mpc", Some("A"), None, "10", None),
+        ("models/quadrotor_rates.mpc", None, None, "0", None),
+        ("models/paper_pointmass.mpc", None, None, "0", None),
+        (
+            "models/quadrotor_rates.mpc",
+            None,
+            Some(QpMethod::Condensed),
+            "20",
+            Some("Condensed"),
+        ),
+        (
+            "models/quadrotor_rates.mpc",
+            Some("A"),
+            Some(QpMethod::Riccati),
+            "0",
+            Some("Riccati"),
+        ),
+    ];
+    for (file, variant, method, nc, set) in cases {
+        let opts = Options {
+            qp: QpOptions {
+                method,
+                ..QpOptions::default()
+            },
+            ..Options::new()
+        };
+        let g = regenerate(file, variant, &opts);
+        let lib = lib_rs(&g);
+        let what = format!("{file} {variant:?} {method:?}");
+        assert!(
+            lib.contains(&format!("pub const NC: usize = {nc};")),
+            "{what}"
+        );
+        assert!(
+            lib.contains("Rti<Real, Model, NX, NU, NP, NY, NYN, NG, NGN, N, NC>"),
+            "{what}"
+        );
+        let line = |m: &str| format!("s.qp.method = mpc_runtime::QpMethod::{m};");
+        for m in ["Condensed", "Riccati"] {
+            assert_eq!(lib.contains(&line(m)), set == Some(m), "{what}: {m}");
+        }
+    }
+}
+
+/// The checked-in QR-bench A solver (f32) condenses its QPs, B (f64) solves them by the
+/// Riccati recursion; both reach the hover.
+#[test]
+fn generated_solvers_condense_where_the_generator_chose_to() {
+    let x0 = quadrotor::X0;
+    let mut a = Box::new(quadrotor_rates_f32::Solver::new());
+    let mut x = SVector::from(x0);
+    for _ in 0..100 {
+        a.prepare();
+        assert!(a.rti().condensed());
+        a.set_x0(&x.cast::<f32>().into()).unwrap();
+        assert_eq!(a.feedback().status, quadrotor_rates_f32::RtiStatus::Ok);
+        let u = SVector::from(a.u0()).cast::<f64>();
+        x = quadrotor::plant(&x, &u, 0.04, 10);
+    }
+    let err = ((x[0] - 4.0).powi(2) + x[1].powi(2) + (x[2] - 2.0).powi(2)).sqrt();
+    assert!(err < 0.01, "A (f32, condensed): final position error {err}");
+    let mut b = Box::new(quadrotor_rates::Solver::new());
+    b.prepare();
+    assert!(!b.rti().condensed());
 }
 
 /// xorshift64*.

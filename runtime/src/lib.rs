@@ -35,6 +35,7 @@ pub use model::Model;
 pub use nalgebra;
 pub use qp::{
     OcpQp, QpInfo, QpMethod, QpSettings, QpSolution, QpSolver, QpStage, QpStatus, QpTerminal,
+    condensing_pays,
 };
 pub use real::Real;
 pub use rti::{Rti, RtiInfo, RtiSettings, RtiStatus, SetError};

@@ -233,6 +233,17 @@ pub struct QpSettings<T> {
     pub method: QpMethod,
 }
 
+/// Whether condensing a QP with these dimensions is estimated cheaper per interior-point
+/// iteration than the Riccati recursion: `(N NU)^3 / 6 <= N (2 NX^3 + 3 NX^2 NU)`
+/// multiply-adds (dense Cholesky against the recursion's products). The rule of
+/// [`QpMethod::Auto`]; the code generator gives a solver condensing storage by it.
+pub const fn condensing_pays(nx: usize, nu: usize, n: usize) -> bool {
+    let (nx, nu, n) = (nx as u128, nu as u128, n as u128);
+    let dense = n * nu * n * nu * n * nu;
+    let riccati = 6 * n * (2 * nx * nx * nx + 3 * nx * nx * nu);
+    dense <= riccati
+}
+
 /// How [`QpSolver`] solves its Newton systems.
 ///
 /// Condensing eliminates the states through the dynamics once per QP, in
@@ -247,9 +258,7 @@ pub struct QpSettings<T> {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[repr(C)]
 pub enum QpMethod {
-    /// Condensing when it applies and its estimated cost per iteration,
-    /// `(N NU)^3 / 6`, is at most the Riccati recursion's `N (2 NX^3 + 3 NX^2 NU)`;
-    /// the Riccati recursion otherwise.
+    /// Condensing when it applies and [`condensing_pays`]; the Riccati recursion otherwise.
     Auto = 0,
     /// Always the Riccati recursion.
     Riccati = 1,

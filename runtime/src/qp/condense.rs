@@ -26,7 +26,7 @@
 //! the states follow from the dynamics and the dynamics multipliers from the state
 //! stationarity conditions (there are no state bounds), backwards.
 
-use super::{Mat, OcpQp, QpMethod, QpSolver, Vect, regularized_cholesky};
+use super::{Mat, OcpQp, QpMethod, QpSolver, Vect, condensing_pays, regularized_cholesky};
 use crate::kernels::{add_mul_sum, mul, mul_tr, sub_mul_tr_sum, tr_mul};
 use crate::real::Real;
 use crate::rows::Rhs;
@@ -51,10 +51,7 @@ impl<
             QpMethod::Riccati => return false,
             QpMethod::Condensed => {}
             QpMethod::Auto => {
-                let (n, nx, nu) = ((N * NU) as f64, NX as f64, NU as f64);
-                let dense = n * n * n / 6.0;
-                let riccati = N as f64 * (2.0 * nx * nx * nx + 3.0 * nx * nx * nu);
-                if dense > riccati {
+                if !condensing_pays(NX, NU, N) {
                     return false;
                 }
             }
