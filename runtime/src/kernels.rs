@@ -25,6 +25,30 @@ pub(crate) fn mul<T: Real, const R: usize, const K: usize, const C: usize>(
     SMatrix::from_array_storage(nalgebra::ArrayStorage(out))
 }
 
+/// `a * b`, skipping the zero entries of `b`: the same result as [`mul`] for finite `a` (a
+/// skipped term would add an exact zero), at the cost of the nonzeros of `b`. For model
+/// Jacobians (`A`, `B`, residual and constraint Jacobians), whose structural zeros the
+/// generated code leaves at exactly zero.
+#[inline(always)]
+pub(crate) fn mul_sparse<T: Real, const R: usize, const K: usize, const C: usize>(
+    a: &SMatrix<T, R, K>,
+    b: &SMatrix<T, K, C>,
+) -> SMatrix<T, R, C> {
+    let (ad, bd) = (&a.data.0, &b.data.0);
+    let mut out = [[T::ZERO; R]; C];
+    for j in 0..C {
+        for k in 0..K {
+            let bkj = bd[j][k];
+            if bkj != T::ZERO {
+                for i in 0..R {
+                    out[j][i] += ad[k][i] * bkj;
+                }
+            }
+        }
+    }
+    SMatrix::from_array_storage(nalgebra::ArrayStorage(out))
+}
+
 /// `a' * b`.
 #[inline(always)]
 pub(crate) fn tr_mul<T: Real, const K: usize, const R: usize, const C: usize>(
@@ -119,6 +143,11 @@ mod tests {
         let b = SMatrix::<f64, 4, 2>::from_fn(|i, j| (i * 5 + j * 11) as f64 * 0.21 - 2.0);
         let c = SMatrix::<f64, 3, 2>::from_fn(|i, j| (i + 2 * j) as f64 * 1.3 - 0.5);
         assert!((mul(&a, &b) - a * b).amax() < 1e-12);
+        let mut sparse = b;
+        sparse[(1, 0)] = 0.0;
+        sparse[(3, 1)] = 0.0;
+        assert_eq!(mul_sparse(&a, &sparse), mul(&a, &sparse));
+        assert!((mul_sparse(&a, &sparse) - a * sparse).amax() < 1e-12);
         assert!((tr_mul(&a, &c) - a.transpose() * c).amax() < 1e-12);
         let d = SMatrix::<f64, 2, 4>::from_fn(|i, j| (3 * i + j) as f64 * 0.7 - 1.1);
         assert!((mul_tr(&a, &d) - a * d.transpose()).amax() < 1e-12);

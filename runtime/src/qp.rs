@@ -35,7 +35,7 @@
 
 use nalgebra::{SMatrix, SVector};
 
-use crate::kernels::{mul, tr_mul};
+use crate::kernels::{mul_sparse, tr_mul};
 use crate::real::Real;
 use crate::rows::{BoundError, Rhs, Rows, Soft};
 
@@ -411,11 +411,11 @@ pub struct QpSolver<
     /// The last [`prepare`](Self::prepare) condensed the QP (see [`condense`]).
     condensed: bool,
     /// Condensed Hessian blocks `H_ij` (`i >= j`), the Cholesky factor of `H + Sigma`, the
-    /// gradient at `x0 = 0` and its derivative by `x0` (`g = gc + xc' x0`).
+    /// gradient at `x0 = 0` and its derivative by `x0` (`g = gc + xc x0`).
     hc: [[Mat<T, NU, NU>; NC]; NC],
     lc: [[Mat<T, NU, NU>; NC]; NC],
     gc: [Vect<T, NU>; NC],
-    xc: [Mat<T, NX, NU>; NC],
+    xc: [Mat<T, NU, NX>; NC],
 }
 
 impl<
@@ -930,21 +930,24 @@ impl<
         }
         let t = &qp.terminal;
         let sg = self.rgn.sigma(Some(&self.sgn));
-        let mut p = t.q
+        let pn = t.q
             + Mat::<T, NX, NX>::from_diagonal(&self.rxn.sigma(None))
             + t.c.transpose() * Mat::<T, NGN, NGN>::from_diagonal(&sg) * t.c;
+        let mut p = (pn + pn.transpose()) * T::lit(0.5);
         for k in (0..N).rev() {
             let s = &qp.stages[k];
             self.pn[k] = p;
             let sig_g = Mat::<T, NG, NG>::from_diagonal(&self.rg[k].sigma(Some(&self.sg[k])));
             let dts = s.d.transpose() * sig_g;
-            let pa = mul(&p, &s.a);
-            let pb = mul(&p, &s.b);
+            // Products with A and B on the right, where their zeros are skipped: with P
+            // symmetric, B'PB = (PB)'B, B'PA = (PB)'A, A'PA = (PA)'A.
+            let pa = mul_sparse(&p, &s.a);
+            let pbt = mul_sparse(&p, &s.b).transpose();
             let rbar = s.r
                 + Mat::<T, NU, NU>::from_diagonal(&self.ru[k].sigma(None))
                 + dts * s.d
-                + tr_mul(&s.b, &pb);
-            let sbar = s.s + dts * s.c + tr_mul(&s.b, &pa);
+                + mul_sparse(&pbt, &s.b);
+            let sbar = s.s + dts * s.c + mul_sparse(&pbt, &s.a);
             let Some(chol) = regularized_cholesky(rbar, self.settings.reg) else {
                 return false;
             };
@@ -956,7 +959,7 @@ impl<
                 let qt = s.q
                     + Mat::<T, NX, NX>::from_diagonal(&self.rx[k].sigma(None))
                     + s.c.transpose() * sig_g * s.c;
-                let pk = qt + tr_mul(&s.a, &pa) + tr_mul(&sbar, &kmat);
+                let pk = qt + mul_sparse(&pa.transpose(), &s.a) + tr_mul(&sbar, &kmat);
                 p = (pk + pk.transpose()) * T::lit(0.5);
             }
             if !finite_mat(&self.kmat[k]) {

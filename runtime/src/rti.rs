@@ -15,6 +15,7 @@
 
 use nalgebra::{SMatrix, SVector};
 
+use crate::kernels::{mul, mul_sparse};
 use crate::model::Model;
 use crate::qp::{OcpQp, QpInfo, QpSettings, QpSolver, QpStatus};
 use crate::real::Real;
@@ -270,7 +271,9 @@ impl<
         }
     }
 
-    /// Sets the stage weight `W` and terminal weight `W_N`.
+    /// Sets the stage weight `W` and terminal weight `W_N`. The cost `1/2 r'Wr` depends only
+    /// on the symmetric part of `W`, which is what is kept (`(W + W') / 2`; a symmetric `W`
+    /// is kept exactly).
     ///
     /// # Errors
     /// [`SetError::NonFinite`] if an entry is NaN or infinite.
@@ -282,8 +285,9 @@ impl<
         if !(all_finite(w) && all_finite(wn)) {
             return Err(SetError::NonFinite);
         }
-        self.w = *w;
-        self.wn = *wn;
+        let half = T::lit(0.5);
+        self.w = w * half + w.transpose() * half;
+        self.wn = wn * half + wn.transpose() * half;
         self.w_diag = is_diagonal(w);
         self.wn_diag = is_diagonal(wn);
         Ok(())
@@ -502,16 +506,14 @@ impl<
             } else {
                 (w * jx, w * ju)
             };
-            s.q = jx.tr_mul(&wjx);
-            s.s = ju.tr_mul(&wjx);
-            s.r = ju.tr_mul(&wju);
-            let wr = if self.w_diag {
-                scale_rows(&w, &r)
-            } else {
-                w * r
-            };
-            s.gx = jx.tr_mul(&wr);
-            s.gu = ju.tr_mul(&wr);
+            // J'WJ as (WJ)'J: the Jacobian on the right, where its zeros are skipped (a
+            // residual that selects states and controls is mostly zeros).
+            let (wjxt, wjut) = (wjx.transpose(), wju.transpose());
+            s.q = mul_sparse(&wjxt, &jx);
+            s.s = mul_sparse(&wjut, &jx);
+            s.r = mul_sparse(&wjut, &ju);
+            s.gx = mul(&wjxt, &r);
+            s.gu = mul(&wjut, &r);
             s.lbx = self.lbx - x;
             s.ubx = self.ubx - x;
             s.lbu = self.lbu - u;
@@ -526,13 +528,14 @@ impl<
         let t = &mut self.qp.terminal;
         let mut jx = SMatrix::<T, NYN, NX>::zeros();
         let r = self.model.terminal_residual(&xn, &pn, &mut jx) - self.yref_n;
-        let (wjx, wr) = if self.wn_diag {
-            (scale_rows(&wn, &jx), scale_rows(&wn, &r))
+        let wjx = if self.wn_diag {
+            scale_rows(&wn, &jx)
         } else {
-            (wn * jx, wn * r)
+            wn * jx
         };
-        t.q = jx.tr_mul(&wjx);
-        t.gx = jx.tr_mul(&wr);
+        let wjxt = wjx.transpose();
+        t.q = mul_sparse(&wjxt, &jx);
+        t.gx = mul(&wjxt, &r);
         t.lbx = self.lbx - xn;
         t.ubx = self.ubx - xn;
         let h = self.model.terminal_constraints(&xn, &pn, &mut t.c);

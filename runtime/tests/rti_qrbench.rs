@@ -153,8 +153,8 @@ fn config_a_in_f32_follows_f64() {
 }
 
 /// The Gauss-Newton Hessian and gradient of every stage equal J'WJ and J'W(y - yref) computed
-/// here with nalgebra, for a diagonal W (the row-scaling path) and a dense symmetric W (the
-/// product path), and the two paths agree where W is the same matrix.
+/// here with nalgebra, for a diagonal W (the row-scaling path), a dense symmetric W (the
+/// product path), and a non-symmetric W (its symmetric part).
 #[test]
 fn gauss_newton_terms_match_j_w_j_for_diagonal_and_dense_weights() {
     use mpc_runtime::Model;
@@ -172,9 +172,15 @@ fn gauss_newton_terms_match_j_w_j_for_diagonal_and_dense_weights() {
     // A dense positive definite weight: diag + a rank-one coupling.
     let v = SVector::<f64, NY>::from_fn(|i, _| 0.1 * (i as f64 - 6.0));
     let w_dense = w_diag + v * v.transpose();
+    // A non-symmetric weight: only its symmetric part (here w_dense) enters the cost.
+    let skew = SMatrix::<f64, NY, NY>::from_fn(|i, j| 0.05 * (i as f64 - j as f64));
     let wn = SMatrix::<f64, NX, NX>::identity() * 3.0;
-    for w in [w_diag, w_dense] {
-        s.set_weights(&w, &wn).unwrap();
+    for (given, w) in [
+        (w_diag, w_diag),
+        (w_dense, w_dense),
+        (w_dense + skew, w_dense),
+    ] {
+        s.set_weights(&given, &wn).unwrap();
         s.prepare();
         let (mut jx, mut ju) = (
             SMatrix::<f64, NY, NX>::zeros(),

@@ -2,7 +2,7 @@
 //! controls `u = (u_0, ..., u_{N-1})`,
 //!
 //! ```text
-//! min 1/2 u'H u + (gc + xc' x0)' u   s.t.  lbu_k <= u_k <= ubu_k,
+//! min 1/2 u'H u + (gc + xc x0)' u   s.t.  lbu_k <= u_k <= ubu_k,
 //! ```
 //!
 //! solved by the same interior-point iteration, whose Newton systems are then one dense block
@@ -22,12 +22,13 @@
 //! p_k = gx_k + A'(p_{k+1} + P_{k+1} f),    P_k = Q_k + A'P_{k+1}A
 //! ```
 //!
-//! and `xc_j = X_{0,j}`. That is `O(N^2 NX^2 NU + N NX^3)` once per QP. After the iteration
-//! the states follow from the dynamics and the dynamics multipliers from the state
+//! and `xc_j = X_{0,j}'` (stored transposed). That is `O(N^2 NX^2 NU + N NX^3)` once per
+//! QP, less where `A` and `B` have zeros (the products skip them). After the iteration the
+//! states follow from the dynamics and the dynamics multipliers from the state
 //! stationarity conditions (there are no state bounds), backwards.
 
 use super::{Mat, OcpQp, QpMethod, QpSolver, Vect, condensing_pays, regularized_cholesky};
-use crate::kernels::{add_mul_sum, mul, mul_tr, sub_mul_tr_sum, tr_mul};
+use crate::kernels::{add_mul_sum, mul, mul_sparse, mul_tr, sub_mul_tr_sum, tr_mul};
 use crate::real::Real;
 use crate::rows::Rhs;
 
@@ -75,27 +76,29 @@ impl<
             return false;
         }
         let t = &qp.terminal;
-        let mut p = t.q;
+        let mut p = (t.q + t.q.transpose()) * T::lit(0.5);
         let mut pv = t.gx;
+        // Every product with `A` or `B` has it on the right (`mul_sparse` skips its zeros):
+        // `A'M = (M'A)'` with `P` symmetric, and `xc` holds `X'`.
         for k in (0..NC).rev() {
             let Some(s) = qp.stages.get(k) else {
                 return false;
             };
-            // A' once, so that every product with it is a column-oriented `mul`.
-            let at = s.a.transpose();
-            let pb = mul(&p, &s.b);
+            let pb = mul_sparse(&p, &s.b);
+            let pbt = pb.transpose();
             let pf = pv + mul(&p, &s.f);
-            self.hc[k][k] = s.r + tr_mul(&s.b, &pb);
+            self.hc[k][k] = s.r + mul_sparse(&pbt, &s.b);
             for j in k + 1..NC {
-                self.hc[j][k] = tr_mul(&self.xc[j], &s.b);
-                self.gc[j] += tr_mul(&self.xc[j], &s.f);
-                self.xc[j] = mul(&at, &self.xc[j]);
+                self.hc[j][k] = mul_sparse(&self.xc[j], &s.b);
+                self.gc[j] += mul(&self.xc[j], &s.f);
+                self.xc[j] = mul_sparse(&self.xc[j], &s.a);
             }
             self.gc[k] = s.gu + tr_mul(&s.b, &pf);
-            self.xc[k] = s.s.transpose() + mul(&at, &pb);
+            self.xc[k] = s.s + mul_sparse(&pbt, &s.a);
             if k > 0 {
-                pv = s.gx + mul(&at, &pf);
-                let pk = s.q + mul(&at, &mul(&p, &s.a));
+                pv = s.gx + tr_mul(&s.a, &pf);
+                let pa = mul_sparse(&p, &s.a);
+                let pk = s.q + mul_sparse(&pa.transpose(), &s.a);
                 p = (pk + pk.transpose()) * T::lit(0.5);
             }
         }
@@ -105,7 +108,7 @@ impl<
     /// The condensed gradient at this `x0`, into `gu0`.
     pub(super) fn condensed_gradient(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N>) {
         for k in 0..NC.min(N) {
-            self.gu0[k] = self.gc[k] + tr_mul(&self.xc[k], &qp.x0);
+            self.gu0[k] = self.gc[k] + mul(&self.xc[k], &qp.x0);
         }
     }
 
