@@ -1,5 +1,6 @@
-//! Runs the QR-bench closed loop (config A: N = 10, dt = 0.04, 100 steps) with the hand-written
-//! quadrotor model, for instruction counts per RTI step:
+//! Runs the QR-bench closed loop (config A: N = 10, dt = 0.04, 100 steps; `CONFIG=B`: N = 20,
+//! dt = 0.05, 80 steps) with the hand-written quadrotor model, for instruction counts per RTI
+//! step:
 //!
 //! `valgrind --tool=callgrind target/release/examples/qrbench_loop`
 //!
@@ -17,8 +18,16 @@ use nalgebra::SVector;
 use quadrotor::{X0, plant, qrbench_in};
 
 fn main() {
-    let dt = 0.04;
-    let mut s = qrbench_in::<f64, 10, 10>(dt);
+    // CONFIG=B: N = 20, dt = 0.05, 80 steps (default A: N = 10, dt = 0.04, 100 steps).
+    if std::env::var("CONFIG").as_deref() == Ok("B") {
+        run::<20>(0.05, 80);
+    } else {
+        run::<10>(0.04, 100);
+    }
+}
+
+fn run<const N: usize>(dt: f64, steps: usize) {
+    let mut s = qrbench_in::<f64, N, N>(dt);
     s.settings.qp.method = match std::env::var("METHOD").as_deref() {
         Ok("riccati") => QpMethod::Riccati,
         Ok("condensed") => QpMethod::Condensed,
@@ -39,7 +48,6 @@ fn main() {
     }
     let mut x = SVector::from(X0);
     let mut iterations = 0u32;
-    let steps = 100;
     for _ in 0..steps {
         s.prepare();
         let (u, info) = s.feedback(&x);
