@@ -38,6 +38,10 @@ pub trait Real: RealField + Copy + Default + PartialOrd {
     /// Default iterative-refinement steps per Newton solve: none in f64, one in f32, where the
     /// Riccati matrices lose the accuracy it recovers.
     const DEFAULT_REFINE: u32;
+    /// Default of [`QpSettings::polish`](crate::QpSettings::polish): on in f32, where the
+    /// interior point's complementarity tolerance leaves weakly active bounds about
+    /// `mu / lam` off, off in f64.
+    const DEFAULT_POLISH: bool;
 
     /// Conversion from an `f64` literal (rounding for `f32`).
     fn lit(v: f64) -> Self;
@@ -64,6 +68,7 @@ impl Real for f64 {
     const SQP_TOL: Self = 1e-6;
     const DEFAULT_MU0: Self = 100.0;
     const DEFAULT_REFINE: u32 = 0;
+    const DEFAULT_POLISH: bool = false;
 
     #[inline]
     fn lit(v: f64) -> Self {
@@ -98,6 +103,7 @@ impl Real for f32 {
     const SQP_TOL: Self = 1e-4;
     const DEFAULT_MU0: Self = 100.0;
     const DEFAULT_REFINE: u32 = 1;
+    const DEFAULT_POLISH: bool = true;
 
     #[inline]
     fn lit(v: f64) -> Self {

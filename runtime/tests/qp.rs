@@ -105,6 +105,15 @@ macro_rules! condensed_against_clarabel {
                 let xs: Vec<_> = (0..=$n).map(|k| *sol.state(k).unwrap()).collect();
                 let err = compare(&reference, &sol.u, &xs);
                 prop_assert!(err <= 1e-7, "condensed differs from clarabel by {err:e} (relative)");
+                // Polished (off by default in f64): the same solution, on the active bounds.
+                let mut polished = solver.clone();
+                polished.settings.polish = true;
+                prop_assert_eq!(polished.solve(&qp).status, QpStatus::Solved);
+                prop_assert!(polished.polished(), "the polished solution was refused");
+                let ps = polished.solution();
+                let pxs: Vec<_> = (0..=$n).map(|k| *ps.state(k).unwrap()).collect();
+                let err = compare(&reference, &ps.u, &pxs);
+                prop_assert!(err <= 1e-7, "polished differs from clarabel by {err:e} (relative)");
                 let mut riccati = Box::new(QpSolver::<f64, $nx, $nu, 0, 0, $n>::NEW);
                 riccati.settings = solver.settings;
                 prop_assert_eq!(riccati.solve(&qp).status, QpStatus::Solved);
@@ -117,6 +126,82 @@ macro_rules! condensed_against_clarabel {
         }
     };
 }
+
+/// A QP with control bounds only, in `f32`: the data rounded to f32 (what an f32 solver
+/// sees), with `round_trip` the same rounded data in f64 for the reference.
+fn to_f32<const NX: usize, const NU: usize, const N: usize>(
+    qp: &OcpQp<f64, NX, NU, 0, 0, N>,
+) -> OcpQp<f32, NX, NU, 0, 0, N> {
+    let mut out = OcpQp::<f32, NX, NU, 0, 0, N>::NEW;
+    out.x0 = qp.x0.cast();
+    for (o, s) in out.stages.iter_mut().zip(&qp.stages) {
+        (o.q, o.s, o.r, o.gx, o.gu) =
+            (s.q.cast(), s.s.cast(), s.r.cast(), s.gx.cast(), s.gu.cast());
+        (o.a, o.b, o.f) = (s.a.cast(), s.b.cast(), s.f.cast());
+        (o.lbx, o.ubx, o.lbu, o.ubu) = (s.lbx.cast(), s.ubx.cast(), s.lbu.cast(), s.ubu.cast());
+    }
+    let (o, t) = (&mut out.terminal, &qp.terminal);
+    (o.q, o.gx, o.lbx, o.ubx) = (t.q.cast(), t.gx.cast(), t.lbx.cast(), t.ubx.cast());
+    out
+}
+
+fn round_trip<const NX: usize, const NU: usize, const N: usize>(
+    qp: &OcpQp<f32, NX, NU, 0, 0, N>,
+) -> OcpQp<f64, NX, NU, 0, 0, N> {
+    let mut out = OcpQp::<f64, NX, NU, 0, 0, N>::NEW;
+    out.x0 = qp.x0.cast();
+    for (o, s) in out.stages.iter_mut().zip(&qp.stages) {
+        (o.q, o.s, o.r, o.gx, o.gu) =
+            (s.q.cast(), s.s.cast(), s.r.cast(), s.gx.cast(), s.gu.cast());
+        (o.a, o.b, o.f) = (s.a.cast(), s.b.cast(), s.f.cast());
+        (o.lbx, o.ubx, o.lbu, o.ubu) = (s.lbx.cast(), s.ubx.cast(), s.lbu.cast(), s.ubu.cast());
+    }
+    let (o, t) = (&mut out.terminal, &qp.terminal);
+    (o.q, o.gx, o.lbx, o.ubx) = (t.q.cast(), t.gx.cast(), t.lbx.cast(), t.ubx.cast());
+    out
+}
+
+/// The condensed solve in `f32` (what the microcontroller build runs) at its default
+/// settings (polish on), against clarabel on the same rounded data: 1e-3 relative (the
+/// interior point alone, at f32's complementarity tolerance, was 1.4e-3 to 3.3e-3 off).
+macro_rules! condensed_f32_against_clarabel {
+    ($name:ident, $nx:literal, $nu:literal, $n:literal) => {
+        proptest! {
+            #![proptest_config(ProptestConfig { cases: 12, ..ProptestConfig::default() })]
+            #[test]
+            fn $name(seed in any::<u64>()) {
+                let mut qp = random_qp::<$nx, $nu, 0, 0, $n>(seed);
+                for s in qp.stages.iter_mut() {
+                    s.lbx.fill(-f64::INFINITY);
+                    s.ubx.fill(f64::INFINITY);
+                }
+                qp.terminal.lbx.fill(-f64::INFINITY);
+                qp.terminal.ubx.fill(f64::INFINITY);
+                let qp32 = to_f32(&qp);
+                let reference = clarabel_solve(&round_trip(&qp32));
+                prop_assume!(reference.is_some(), "clarabel found no reference solution");
+                let reference = reference.unwrap();
+                prop_assume!(reference.strict_complementarity > 1e-3, "nearly degenerate solution");
+                let mut solver = Box::new(QpSolver::<f32, $nx, $nu, 0, 0, $n, $n>::NEW);
+                solver.settings.method = QpMethod::Condensed;
+                let info = solver.solve(&qp32);
+                prop_assert!(solver.condensed());
+                prop_assert_eq!(info.status, QpStatus::Solved, "{:?}", info);
+                prop_assert!(solver.polished(), "the polished solution was refused");
+                let sol = solver.solution();
+                let us: Vec<SVector<f64, $nu>> = sol.u.iter().map(|u| u.cast()).collect();
+                let xs: Vec<SVector<f64, $nx>> =
+                    (0..=$n).map(|k| sol.state(k).unwrap().cast()).collect();
+                let err = compare(&reference, &us, &xs);
+                prop_assert!(err <= 1e-3, "f32 condensed differs from clarabel by {err:e} (relative)");
+            }
+        }
+    };
+}
+
+condensed_f32_against_clarabel!(condensed_f32_n5, 2, 1, 5);
+condensed_f32_against_clarabel!(condensed_f32_qrbench_sized_n10, 10, 4, 10);
+condensed_f32_against_clarabel!(condensed_f32_n20, 6, 3, 20);
 
 condensed_against_clarabel!(condensed_n5, 2, 1, 5);
 condensed_against_clarabel!(condensed_qrbench_sized_n10, 10, 4, 10);

@@ -32,6 +32,9 @@ use crate::kernels::{add_mul_sum, mul, mul_sparse, mul_tr, sub_mul_tr_sum, tr_mu
 use crate::real::Real;
 use crate::rows::Rhs;
 
+/// Active-set iterations of the polish at most (each one factorization).
+const POLISH_ITERATIONS: usize = 4;
+
 impl<
     T: Real,
     const NX: usize,
@@ -141,13 +144,23 @@ impl<
         [rs / scale, T::ZERO, ri, comp]
     }
 
-    /// Block Cholesky factorization `L L' = H + Sigma` into `lc`, each diagonal block
-    /// regularized as in the Riccati recursion. The diagonal blocks are stored inverted
-    /// (`lc[j][j] = L_jj^-1`), so that every later use is a product.
+    /// Block Cholesky factorization `L L' = H + Sigma` into `lc`; see [`block_cholesky`].
     pub(super) fn condensed_factorize(&mut self) -> bool {
+        for j in 0..NC.min(N) {
+            self.lc[j][j] = self.hc[j][j] + Mat::from_diagonal(&self.ru[j].sigma(None));
+        }
+        self.block_cholesky(false)
+    }
+
+    /// In-place block Cholesky factorization of the symmetric matrix whose lower block
+    /// triangle is in `lc` (diagonal blocks from `lc`, the blocks below them from `hc`
+    /// unless `below_in_lc`), each diagonal block regularized as in the Riccati recursion.
+    /// The diagonal blocks are stored inverted (`lc[j][j] = L_jj^-1`), so that every later
+    /// use is a product.
+    fn block_cholesky(&mut self, below_in_lc: bool) -> bool {
         let n = NC.min(N);
         for j in 0..n {
-            let mut d = self.hc[j][j] + Mat::<T, NU, NU>::from_diagonal(&self.ru[j].sigma(None));
+            let mut d = self.lc[j][j];
             let lj = &self.lc[j][..j];
             sub_mul_tr_sum(&mut d, lj, lj);
             let Some(chol) = regularized_cholesky(d, self.settings.reg) else {
@@ -158,7 +171,11 @@ impl<
                 return false;
             }
             for i in j + 1..n {
-                let mut m = self.hc[i][j];
+                let mut m = if below_in_lc {
+                    self.lc[i][j]
+                } else {
+                    self.hc[i][j]
+                };
                 sub_mul_tr_sum(&mut m, &self.lc[i][..j], &self.lc[j][..j]);
                 // L_ij L_jj' = M.
                 self.lc[i][j] = mul_tr(&m, &inv);
@@ -219,6 +236,123 @@ impl<
             *d = *dk;
             r.direction(dk, rhs, None);
         }
+    }
+
+    /// Active-set polish ([`QpSettings::polish`](super::QpSettings::polish)): primal-dual
+    /// active-set iterations (a semismooth Newton method for the bound-constrained QP) from
+    /// the interior point's controls and multipliers. With `mu = H u + g` (the bounds'
+    /// multipliers, `lam_l - lam_u`), an entry is fixed on its lower bound when the Newton
+    /// step along it, `u_i - mu_i / H_ii`, falls below the bound, on its upper bound when it
+    /// passes it, and free otherwise; the QP with the fixed entries as equalities is solved,
+    /// and the sets are updated until they repeat. Returns whether the result, checked
+    /// against every bound and the multipliers' signs, replaced the controls in `sol.u`.
+    pub(super) fn condensed_polish(&mut self) -> bool {
+        let n = NC.min(N);
+        let mut v = self.sol.u;
+        // The interior point's multipliers to start with.
+        let mut mu = [Vect::<T, NU>::zeros(); N];
+        for (m, r) in mu.iter_mut().zip(&self.ru) {
+            *m = r.dual();
+        }
+        let (mut lower, mut upper) = ([[false; NU]; N], [[false; NU]; N]);
+        let mut settled = false;
+        for _ in 0..POLISH_ITERATIONS {
+            // The active sets of this iterate.
+            let mut changed = false;
+            for k in 0..n {
+                let r = &self.ru[k];
+                for i in 0..NU {
+                    let h = self.hc[k][k][(i, i)].max(T::EPSILON);
+                    let step = v[k][i] - mu[k][i] / h;
+                    let lo = r.has_lo[i] && step < r.lo[i];
+                    let hi = !lo && r.has_hi[i] && step > r.hi[i];
+                    changed |= lo != lower[k][i] || hi != upper[k][i];
+                    (lower[k][i], upper[k][i]) = (lo, hi);
+                    if lo {
+                        v[k][i] = r.lo[i];
+                    } else if hi {
+                        v[k][i] = r.hi[i];
+                    }
+                }
+            }
+            if !changed && settled {
+                break;
+            }
+            if !self.solve_on_active_set(&lower, &upper, &mut v) {
+                return false;
+            }
+            settled = true;
+            for (i, m) in mu.iter_mut().enumerate().take(n) {
+                *m = self.hessian_row(i, &v) + self.gu0[i];
+            }
+        }
+        // Accept if every bound holds and the fixed entries' multipliers have their signs.
+        let tol = self.settings.tol_ineq.max(self.settings.tol_stat);
+        for k in 0..n {
+            let r = &self.ru[k];
+            for i in 0..NU {
+                let (x, m) = (v[k][i], mu[k][i]);
+                let scale = T::ONE.max(x.abs());
+                let ok = if lower[k][i] {
+                    m >= -tol * T::ONE.max(m.abs())
+                } else if upper[k][i] {
+                    m <= tol * T::ONE.max(m.abs())
+                } else {
+                    x.finite()
+                        && (!r.has_lo[i] || x >= r.lo[i] - tol * scale)
+                        && (!r.has_hi[i] || x <= r.hi[i] + tol * scale)
+                };
+                if !ok {
+                    return false;
+                }
+            }
+        }
+        self.sol.u = v;
+        true
+    }
+
+    /// Solves `H v + g = 0` on the free entries with the fixed ones (`lower`, `upper`, already
+    /// at their bounds in `v`) held: a block Cholesky factorization of `H` with the fixed rows
+    /// and columns replaced by the identity, then two Newton steps (the second one is
+    /// iterative refinement).
+    fn solve_on_active_set(
+        &mut self,
+        lower: &[[bool; NU]; N],
+        upper: &[[bool; NU]; N],
+        v: &mut [Vect<T, NU>; N],
+    ) -> bool {
+        let n = NC.min(N);
+        let fixed = |k: usize, i: usize| lower[k][i] || upper[k][i];
+        for i in 0..n {
+            for j in 0..=i {
+                let mut m = self.hc[i][j];
+                for p in 0..NU {
+                    for q in 0..NU {
+                        if fixed(i, p) || fixed(j, q) {
+                            m[(p, q)] = if i == j && p == q { T::ONE } else { T::ZERO };
+                        }
+                    }
+                }
+                self.lc[i][j] = m;
+            }
+        }
+        if !self.block_cholesky(true) {
+            return false;
+        }
+        for _ in 0..2 {
+            let mut r = [Vect::<T, NU>::zeros(); N];
+            for (i, ri) in r.iter_mut().enumerate().take(n) {
+                let g = self.hessian_row(i, v) + self.gu0[i];
+                for p in 0..NU {
+                    ri[p] = if fixed(i, p) { T::ZERO } else { g[p] };
+                }
+            }
+            self.condensed_solve(&mut r);
+            for (vk, rk) in v.iter_mut().zip(&r) {
+                *vk -= *rk;
+            }
+        }
+        v.iter().all(|x| x.iter().all(|e| e.finite()))
     }
 
     /// States from the dynamics and dynamics multipliers from the state stationarity
