@@ -4,7 +4,9 @@
 //!   step 10, where thrust and rate bounds are active), solved by our Riccati interior-point
 //!   method and by clarabel on the identical QP written out in sparse form. Both to their
 //!   default tolerances; clarabel's setup (KKT assembly and symbolic factorization) is outside
-//!   the timed region, so the comparison is solve against solve.
+//!   the timed region, so the comparison is solve against solve. `mpcc-condensed`: the same QP
+//!   condensed (condensing in the timed region), `mpcc-condensed-prepared`: after
+//!   `QpSolver::prepare`, as in a real-time iteration's feedback.
 //! - `rti/{A,B}/{prepare,feedback,step}`: the closed loop of configs A (N = 10, dt = 0.04) and
 //!   B (N = 20, dt = 0.05); each timed iteration is one control step of the loop, which restarts
 //!   after 4 s.
@@ -17,7 +19,7 @@ use std::time::{Duration, Instant};
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{DefaultSettingsBuilder, DefaultSolver, IPSolver, SupportedConeT};
 use criterion::{Criterion, criterion_group, criterion_main};
-use mpc_runtime::{OcpQp, QpSolver, RtiStatus};
+use mpc_runtime::{OcpQp, QpMethod, QpSolver, RtiStatus};
 use nalgebra::SVector;
 
 #[allow(unused_imports)]
@@ -47,6 +49,18 @@ fn bench_qp<const N: usize>(c: &mut Criterion, dt: f64) {
     let mut ours = Box::new(QpSolver::<f64, NX, NU, 0, 0, N>::NEW);
     group.bench_function(format!("mpcc/N{N}"), |b| {
         b.iter(|| black_box(ours.solve(black_box(&qp))))
+    });
+    // Condensed: the whole solve (condensing included), and the part after `prepare` (what
+    // a real-time iteration's feedback phase runs).
+    let mut dense = Box::new(QpSolver::<f64, NX, NU, 0, 0, N, N>::NEW);
+    dense.settings.method = QpMethod::Condensed;
+    group.bench_function(format!("mpcc-condensed/N{N}"), |b| {
+        b.iter(|| black_box(dense.solve(black_box(&qp))))
+    });
+    dense.prepare(&qp);
+    assert!(dense.condensed());
+    group.bench_function(format!("mpcc-condensed-prepared/N{N}"), |b| {
+        b.iter(|| black_box(dense.solve_prepared(black_box(&qp))))
     });
     let d = support::dense(&qp);
     let p = CscMatrix::from(&d.p).to_triu();

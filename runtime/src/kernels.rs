@@ -12,17 +12,7 @@ pub(crate) fn mul<T: Real, const R: usize, const K: usize, const C: usize>(
     a: &SMatrix<T, R, K>,
     b: &SMatrix<T, K, C>,
 ) -> SMatrix<T, R, C> {
-    let (ad, bd) = (&a.data.0, &b.data.0);
-    let mut out = [[T::ZERO; R]; C];
-    for j in 0..C {
-        for k in 0..K {
-            let bkj = bd[j][k];
-            for i in 0..R {
-                out[j][i] += ad[k][i] * bkj;
-            }
-        }
-    }
-    SMatrix::from_array_storage(nalgebra::ArrayStorage(out))
+    mul_impl::<T, R, K, C, false>(a, b)
 }
 
 /// `a * b`, skipping the zero entries of `b`: the same result as [`mul`] for finite `a` (a
@@ -34,15 +24,25 @@ pub(crate) fn mul_sparse<T: Real, const R: usize, const K: usize, const C: usize
     a: &SMatrix<T, R, K>,
     b: &SMatrix<T, K, C>,
 ) -> SMatrix<T, R, C> {
+    mul_impl::<T, R, K, C, true>(a, b)
+}
+
+/// `a * b` column by column (axpy form), skipping zero entries of `b` if `SKIP`.
+#[inline(always)]
+fn mul_impl<T: Real, const R: usize, const K: usize, const C: usize, const SKIP: bool>(
+    a: &SMatrix<T, R, K>,
+    b: &SMatrix<T, K, C>,
+) -> SMatrix<T, R, C> {
     let (ad, bd) = (&a.data.0, &b.data.0);
     let mut out = [[T::ZERO; R]; C];
     for j in 0..C {
         for k in 0..K {
             let bkj = bd[j][k];
-            if bkj != T::ZERO {
-                for i in 0..R {
-                    out[j][i] += ad[k][i] * bkj;
-                }
+            if SKIP && bkj == T::ZERO {
+                continue;
+            }
+            for i in 0..R {
+                out[j][i] += ad[k][i] * bkj;
             }
         }
     }

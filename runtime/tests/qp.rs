@@ -5,7 +5,7 @@
 
 mod support;
 
-use mpc_runtime::{OcpQp, QpMethod, QpSolver, QpStatus};
+use mpc_runtime::{OcpQp, QpMethod, QpSolver, QpStatus, Real};
 use nalgebra::{SMatrix, SVector};
 use proptest::prelude::*;
 use support::{Reference, clarabel_solve, random_qp, random_soft_qp};
@@ -80,13 +80,7 @@ macro_rules! condensed_against_clarabel {
             #![proptest_config(ProptestConfig { cases: 12, ..ProptestConfig::default() })]
             #[test]
             fn $name(seed in any::<u64>()) {
-                let mut qp = random_qp::<$nx, $nu, 0, 0, $n>(seed);
-                for s in qp.stages.iter_mut() {
-                    s.lbx.fill(-f64::INFINITY);
-                    s.ubx.fill(f64::INFINITY);
-                }
-                qp.terminal.lbx.fill(-f64::INFINITY);
-                qp.terminal.ubx.fill(f64::INFINITY);
+                let qp = control_bounded_qp::<$nx, $nu, $n>(seed);
                 let reference = clarabel_solve(&qp);
                 prop_assume!(reference.is_some(), "clarabel found no reference solution");
                 let reference = reference.unwrap();
@@ -127,37 +121,42 @@ macro_rules! condensed_against_clarabel {
     };
 }
 
-/// A QP with control bounds only, in `f32`: the data rounded to f32 (what an f32 solver
-/// sees), with `round_trip` the same rounded data in f64 for the reference.
-fn to_f32<const NX: usize, const NU: usize, const N: usize>(
-    qp: &OcpQp<f64, NX, NU, 0, 0, N>,
-) -> OcpQp<f32, NX, NU, 0, 0, N> {
-    let mut out = OcpQp::<f32, NX, NU, 0, 0, N>::NEW;
-    out.x0 = qp.x0.cast();
-    for (o, s) in out.stages.iter_mut().zip(&qp.stages) {
-        (o.q, o.s, o.r, o.gx, o.gu) =
-            (s.q.cast(), s.s.cast(), s.r.cast(), s.gx.cast(), s.gu.cast());
-        (o.a, o.b, o.f) = (s.a.cast(), s.b.cast(), s.f.cast());
-        (o.lbx, o.ubx, o.lbu, o.ubu) = (s.lbx.cast(), s.ubx.cast(), s.lbu.cast(), s.ubu.cast());
+/// [`random_qp`] with its state bounds removed: control bounds only (condensable).
+fn control_bounded_qp<const NX: usize, const NU: usize, const N: usize>(
+    seed: u64,
+) -> OcpQp<f64, NX, NU, 0, 0, N> {
+    let mut qp = random_qp::<NX, NU, 0, 0, N>(seed);
+    for s in qp.stages.iter_mut() {
+        s.lbx.fill(f64::NEG_INFINITY);
+        s.ubx.fill(f64::INFINITY);
     }
-    let (o, t) = (&mut out.terminal, &qp.terminal);
-    (o.q, o.gx, o.lbx, o.ubx) = (t.q.cast(), t.gx.cast(), t.lbx.cast(), t.ubx.cast());
-    out
+    qp.terminal.lbx.fill(f64::NEG_INFINITY);
+    qp.terminal.ubx.fill(f64::INFINITY);
+    qp
 }
 
-fn round_trip<const NX: usize, const NU: usize, const N: usize>(
-    qp: &OcpQp<f32, NX, NU, 0, 0, N>,
-) -> OcpQp<f64, NX, NU, 0, 0, N> {
-    let mut out = OcpQp::<f64, NX, NU, 0, 0, N>::NEW;
-    out.x0 = qp.x0.cast();
+fn cast_mat<A: Real, B: Real, const R: usize, const C: usize>(
+    m: &SMatrix<A, R, C>,
+) -> SMatrix<B, R, C> {
+    m.map(|v| B::lit(v.to_f64()))
+}
+
+/// A control-bounded QP in another precision (rounded to f32, or such data back in f64).
+fn cast_qp<A: Real, B: Real, const NX: usize, const NU: usize, const N: usize>(
+    qp: &OcpQp<A, NX, NU, 0, 0, N>,
+) -> OcpQp<B, NX, NU, 0, 0, N> {
+    let mut out = OcpQp::<B, NX, NU, 0, 0, N>::NEW;
+    out.x0 = cast_mat(&qp.x0);
     for (o, s) in out.stages.iter_mut().zip(&qp.stages) {
-        (o.q, o.s, o.r, o.gx, o.gu) =
-            (s.q.cast(), s.s.cast(), s.r.cast(), s.gx.cast(), s.gu.cast());
-        (o.a, o.b, o.f) = (s.a.cast(), s.b.cast(), s.f.cast());
-        (o.lbx, o.ubx, o.lbu, o.ubu) = (s.lbx.cast(), s.ubx.cast(), s.lbu.cast(), s.ubu.cast());
+        (o.q, o.s, o.r) = (cast_mat(&s.q), cast_mat(&s.s), cast_mat(&s.r));
+        (o.gx, o.gu) = (cast_mat(&s.gx), cast_mat(&s.gu));
+        (o.a, o.b, o.f) = (cast_mat(&s.a), cast_mat(&s.b), cast_mat(&s.f));
+        (o.lbx, o.ubx) = (cast_mat(&s.lbx), cast_mat(&s.ubx));
+        (o.lbu, o.ubu) = (cast_mat(&s.lbu), cast_mat(&s.ubu));
     }
     let (o, t) = (&mut out.terminal, &qp.terminal);
-    (o.q, o.gx, o.lbx, o.ubx) = (t.q.cast(), t.gx.cast(), t.lbx.cast(), t.ubx.cast());
+    (o.q, o.gx) = (cast_mat(&t.q), cast_mat(&t.gx));
+    (o.lbx, o.ubx) = (cast_mat(&t.lbx), cast_mat(&t.ubx));
     out
 }
 
@@ -170,15 +169,8 @@ macro_rules! condensed_f32_against_clarabel {
             #![proptest_config(ProptestConfig { cases: 12, ..ProptestConfig::default() })]
             #[test]
             fn $name(seed in any::<u64>()) {
-                let mut qp = random_qp::<$nx, $nu, 0, 0, $n>(seed);
-                for s in qp.stages.iter_mut() {
-                    s.lbx.fill(-f64::INFINITY);
-                    s.ubx.fill(f64::INFINITY);
-                }
-                qp.terminal.lbx.fill(-f64::INFINITY);
-                qp.terminal.ubx.fill(f64::INFINITY);
-                let qp32 = to_f32(&qp);
-                let reference = clarabel_solve(&round_trip(&qp32));
+                let qp32 = cast_qp::<f64, f32, $nx, $nu, $n>(&control_bounded_qp(seed));
+                let reference = clarabel_solve(&cast_qp::<f32, f64, $nx, $nu, $n>(&qp32));
                 prop_assume!(reference.is_some(), "clarabel found no reference solution");
                 let reference = reference.unwrap();
                 prop_assume!(reference.strict_complementarity > 1e-3, "nearly degenerate solution");
