@@ -246,6 +246,8 @@ impl<
     /// passes it, and free otherwise; the QP with the fixed entries as equalities is solved,
     /// and the sets are updated until they repeat. Returns whether the result, checked
     /// against every bound and the multipliers' signs, replaced the controls in `sol.u`.
+    // Not inlined: its arrays stay out of the stack frame of a solve that does not polish.
+    #[inline(never)]
     pub(super) fn condensed_polish(&mut self) -> bool {
         let n = NC.min(N);
         let mut v = self.sol.u;
