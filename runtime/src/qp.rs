@@ -231,12 +231,13 @@ pub struct QpSettings<T> {
     pub refine: u32,
     /// How the Newton systems are solved: Riccati recursion or condensing (see [`QpMethod`]).
     pub method: QpMethod,
-    /// After a condensed QP is solved, take the interior point's active set (a bound whose
-    /// multiplier exceeds its slack) and solve the QP with those bounds as equalities and the
-    /// others dropped; keep that solution if it satisfies every bound and its multipliers have
-    /// the right signs (else the interior point's). It costs one more factorization and puts
-    /// active bounds exactly on their values; the residuals reported stay the interior
-    /// point's. Default: [`Real::DEFAULT_POLISH`].
+    /// After a condensed QP is solved, refine the solution by primal-dual active-set
+    /// iterations started from the interior point's (each solves the QP with the bounds
+    /// taken as active held as equalities and the others dropped; at most 4, one
+    /// factorization each), and keep the result if it satisfies every bound and its
+    /// multipliers have the right signs (else the interior point's; see
+    /// [`QpSolver::polished`]). Active bounds end exactly on their values; the residuals
+    /// reported stay the interior point's. Default: [`Real::DEFAULT_POLISH`].
     pub polish: bool,
 }
 
@@ -246,8 +247,15 @@ pub struct QpSettings<T> {
 /// [`QpMethod::Auto`]; the code generator gives a solver condensing storage by it.
 pub const fn condensing_pays(nx: usize, nu: usize, n: usize) -> bool {
     let (nx, nu, n) = (nx as u128, nu as u128, n as u128);
-    let dense = n * nu * n * nu * n * nu;
-    let riccati = 6 * n * (2 * nx * nx * nx + 3 * nx * nx * nu);
+    let nz = n.saturating_mul(nu);
+    let dense = nz.saturating_mul(nz).saturating_mul(nz);
+    let cubic = nx.saturating_mul(nx).saturating_mul(nx);
+    let mixed = nx.saturating_mul(nx).saturating_mul(nu);
+    let riccati = cubic
+        .saturating_mul(2)
+        .saturating_add(mixed.saturating_mul(3))
+        .saturating_mul(n)
+        .saturating_mul(6);
     dense <= riccati
 }
 

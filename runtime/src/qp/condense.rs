@@ -402,6 +402,19 @@ mod tests {
     use super::*;
 
     #[test]
+    fn condensing_pays_for_short_horizons_only() {
+        // QR-bench A and B, N = 40 (NX = 10, NU = 4); the multiply-add counts by hand:
+        // A 40^3 = 64,000 <= 6 * 10 * 3,200 = 192,000; B 512,000 > 384,000.
+        assert!(condensing_pays(10, 4, 10));
+        assert!(!condensing_pays(10, 4, 20));
+        assert!(!condensing_pays(10, 4, 40));
+        assert!(condensing_pays(2, 1, 5));
+        assert!(!condensing_pays(10, 4, 1000));
+        // No overflow panic for absurd dimensions (the products saturate).
+        let _ = condensing_pays(usize::MAX, usize::MAX, usize::MAX);
+    }
+
+    #[test]
     fn lower_inverse_inverts() {
         let l = Mat::<f64, 4, 4>::from_fn(|i, j| {
             if i == j {
