@@ -5,7 +5,7 @@
 
 mod support;
 
-use mpc_runtime::{OcpQp, QpMethod, QpSolver, QpStatus, Real};
+use mpc_runtime::{OcpQp, QpInfo, QpMethod, QpSettings, QpSolution, QpSolver, QpStatus, Real};
 use nalgebra::{SMatrix, SVector};
 use proptest::prelude::*;
 use support::{Reference, clarabel_solve, random_qp, random_soft_qp};
@@ -35,6 +35,27 @@ fn compare<const NX: usize, const NU: usize>(
     du.max(dx) / scale
 }
 
+/// Judges a solve: status `Solved` and every residual within the solver's tolerances; returns
+/// the solution's largest difference from the reference (relative, as [`compare`]).
+fn solved_error<const NX: usize, const NU: usize, const N: usize>(
+    info: &QpInfo<f64>,
+    st: &QpSettings<f64>,
+    sol: &QpSolution<f64, NX, NU, N>,
+    reference: &Reference<NX, NU>,
+) -> Result<f64, TestCaseError> {
+    prop_assert_eq!(info.status, QpStatus::Solved, "{:?}", info);
+    prop_assert!(
+        info.res_stat <= st.tol_stat
+            && info.res_eq <= st.tol_eq
+            && info.res_ineq <= st.tol_ineq
+            && info.mu <= st.tol_comp,
+        "{:?}",
+        info
+    );
+    let xs: Vec<_> = (0..=N).map(|k| *sol.state(k).unwrap()).collect();
+    Ok(compare(reference, &sol.u, &xs))
+}
+
 macro_rules! against_clarabel {
     ($name:ident, $nx:literal, $nu:literal, $ng:literal, $ngn:literal, $n:literal) => {
         proptest! {
@@ -56,15 +77,8 @@ macro_rules! against_clarabel {
                 solver.settings.tol_stat = 1e-10;
                 solver.settings.tol_comp = 1e-12;
                 let info = solver.solve(&qp);
-                prop_assert_eq!(info.status, QpStatus::Solved, "{:?}", info);
-                let st = solver.settings;
-                prop_assert!(info.res_stat <= st.tol_stat && info.res_eq <= st.tol_eq
-                    && info.res_ineq <= st.tol_ineq && info.mu <= st.tol_comp, "{:?}", info);
-                let sol = solver.solution();
-                let xs: Vec<_> = (0..=$n).map(|k| *sol.state(k).unwrap()).collect();
-                let err = compare(&reference, &sol.u, &xs);
+                let err = solved_error(&info, &solver.settings, solver.solution(), &reference)?;
                 prop_assert!(err <= 1e-7, "f64 differs from clarabel by {err:e} (relative)");
-
             }
         }
     };
@@ -91,13 +105,7 @@ macro_rules! condensed_against_clarabel {
                 solver.settings.tol_comp = 1e-12;
                 let info = solver.solve(&qp);
                 prop_assert!(solver.condensed(), "the QP was not condensed");
-                prop_assert_eq!(info.status, QpStatus::Solved, "{:?}", info);
-                let st = solver.settings;
-                prop_assert!(info.res_stat <= st.tol_stat && info.res_eq <= st.tol_eq
-                    && info.res_ineq <= st.tol_ineq && info.mu <= st.tol_comp, "{:?}", info);
-                let sol = solver.solution();
-                let xs: Vec<_> = (0..=$n).map(|k| *sol.state(k).unwrap()).collect();
-                let err = compare(&reference, &sol.u, &xs);
+                let err = solved_error(&info, &solver.settings, solver.solution(), &reference)?;
                 prop_assert!(err <= 1e-7, "condensed differs from clarabel by {err:e} (relative)");
                 // Polished (off by default in f64): the same solution, on the active bounds.
                 let mut polished = solver.clone();
@@ -113,7 +121,7 @@ macro_rules! condensed_against_clarabel {
                 prop_assert_eq!(riccati.solve(&qp).status, QpStatus::Solved);
                 prop_assert!(!riccati.condensed());
                 let pi_scale = riccati.solution().pi.iter().fold(1.0f64, |m, p| m.max(p.amax()));
-                let dpi = sol.pi.iter().zip(&riccati.solution().pi)
+                let dpi = solver.solution().pi.iter().zip(&riccati.solution().pi)
                     .fold(0.0f64, |m, (a, b)| m.max((a - b).amax()));
                 prop_assert!(dpi <= 1e-6 * pi_scale, "multipliers differ by {dpi:e}");
             }
@@ -272,13 +280,7 @@ macro_rules! soft_against_clarabel {
                 solver.settings.tol_stat = 1e-10;
                 solver.settings.tol_comp = 1e-12;
                 let info = solver.solve(&qp);
-                prop_assert_eq!(info.status, QpStatus::Solved, "{:?}", info);
-                let st = solver.settings;
-                prop_assert!(info.res_stat <= st.tol_stat && info.res_eq <= st.tol_eq
-                    && info.res_ineq <= st.tol_ineq && info.mu <= st.tol_comp, "{:?}", info);
-                let sol = solver.solution();
-                let xs: Vec<_> = (0..=$n).map(|k| *sol.state(k).unwrap()).collect();
-                let err = compare(&reference, &sol.u, &xs);
+                let err = solved_error(&info, &solver.settings, solver.solution(), &reference)?;
                 prop_assert!(err <= 1e-7, "f64 differs from clarabel by {err:e} (relative)");
                 // A slack is a row's value minus its bound (where violated), so it carries the
                 // primal error times the row's norm.
