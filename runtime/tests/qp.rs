@@ -580,6 +580,47 @@ fn non_finite_data_is_rejected() {
     assert_eq!(solver.solve(&qp).status, QpStatus::Solved);
 }
 
+/// A condensed QP's stage data are checked in `prepare` and only `x0` in `solve_prepared`:
+/// non-finite stage data or crossed control bounds are not condensed and are reported by
+/// the solve; a non-finite `x0` after a good `prepare` is reported too, and the next valid
+/// `x0` solves as if it had not happened.
+#[test]
+fn condensed_input_checks_split_between_prepare_and_solve() {
+    type S = QpSolver<f64, 4, 2, 0, 0, 8, 8>;
+    let good = control_bounded_qp::<4, 2, 8>(5);
+    let mut solver = Box::new(S::NEW);
+    solver.settings.method = QpMethod::Condensed;
+    let mut reference = solver.clone();
+    assert_eq!(reference.solve(&good).status, QpStatus::Solved);
+    assert!(reference.condensed());
+
+    let mut bad = good;
+    bad.stages[2].a[(1, 1)] = f64::NAN;
+    solver.prepare(&bad);
+    assert!(!solver.condensed(), "non-finite data were condensed");
+    assert_eq!(solver.solve_prepared(&bad).status, QpStatus::NonFiniteInput);
+
+    let mut crossed = good;
+    crossed.stages[3].lbu[1] = 2.0;
+    crossed.stages[3].ubu[1] = 1.0;
+    solver.prepare(&crossed);
+    assert!(!solver.condensed(), "crossed bounds were condensed");
+    let info = solver.solve_prepared(&crossed);
+    assert_eq!((info.status, info.iterations), (QpStatus::Infeasible, 0));
+
+    solver.prepare(&good);
+    assert!(solver.condensed());
+    let mut nan_x0 = good;
+    nan_x0.x0[0] = f64::INFINITY;
+    assert_eq!(solver.solve_prepared(&nan_x0).status, QpStatus::NonFiniteInput);
+    let info = solver.solve_prepared(&good);
+    assert_eq!(info.status, QpStatus::Solved);
+    let (a, b) = (solver.solution(), reference.solution());
+    for k in 0..8 {
+        assert!((a.u[k] - b.u[k]).amax() <= 1e-12, "stage {k}: {} vs {}", a.u[k], b.u[k]);
+    }
+}
+
 /// A dual warm start (multipliers of the previous solve) reaches the same solution as a cold
 /// start on a nearby QP, in fewer iterations. Both stop at the default tolerances, which pin
 /// the solution to about 1e-6 (weakly active bounds sit mu / lambda off), hence that bound.
