@@ -87,7 +87,8 @@ fn libm_fn(name: &str, s: Scalar) -> TokenStream {
     quote!(libm::#id)
 }
 
-/// The statements computing `f` and writing its outputs: temporaries, then `fill(0)` of
+/// The statements computing `f` and writing its outputs: temporaries, then zeroing (a slice
+/// fill, which compiles to a memset; nalgebra's `Matrix::fill` is an element loop) of
 /// every output matrix and the writes of its nonzero entries, then the returned vector.
 fn body(
     f: &Function,
@@ -226,7 +227,7 @@ fn body(
     });
     let fills = mats.iter().map(|m| {
         let m = format_ident!("{}", m);
-        quote!(#m.fill(0.0);)
+        quote!(#m.as_mut_slice().fill(0.0);)
     });
     match ret {
         Some(ty) => quote! {
