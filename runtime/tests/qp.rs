@@ -612,12 +612,20 @@ fn condensed_input_checks_split_between_prepare_and_solve() {
     assert!(solver.condensed());
     let mut nan_x0 = good;
     nan_x0.x0[0] = f64::INFINITY;
-    assert_eq!(solver.solve_prepared(&nan_x0).status, QpStatus::NonFiniteInput);
+    assert_eq!(
+        solver.solve_prepared(&nan_x0).status,
+        QpStatus::NonFiniteInput
+    );
     let info = solver.solve_prepared(&good);
     assert_eq!(info.status, QpStatus::Solved);
     let (a, b) = (solver.solution(), reference.solution());
     for k in 0..8 {
-        assert!((a.u[k] - b.u[k]).amax() <= 1e-12, "stage {k}: {} vs {}", a.u[k], b.u[k]);
+        assert!(
+            (a.u[k] - b.u[k]).amax() <= 1e-12,
+            "stage {k}: {} vs {}",
+            a.u[k],
+            b.u[k]
+        );
     }
 }
 
