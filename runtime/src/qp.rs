@@ -191,6 +191,23 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
         stages: [QpStage::NEW; N],
         terminal: QpTerminal::NEW,
     };
+
+    /// All zeros, the bounds too (every variable fixed at 0): zero-filled memory in a
+    /// `static`, for a QP whose every field is written before it is solved (the RTI's).
+    pub(crate) const ZEROED: Self = {
+        let mut qp = Self::NEW;
+        let z = crate::zeros();
+        let mut k = 0;
+        while k < N {
+            let s = &mut qp.stages[k];
+            (s.lbx, s.ubx, s.lbu, s.ubu) = (z, z, crate::zeros(), crate::zeros());
+            (s.lg, s.ug) = (crate::zeros(), crate::zeros());
+            k += 1;
+        }
+        let t = &mut qp.terminal;
+        (t.lbx, t.ubx, t.lg, t.ug) = (z, z, crate::zeros(), crate::zeros());
+        qp
+    };
 }
 
 impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usize, const N: usize>
@@ -296,6 +313,23 @@ impl<T: Real> QpSettings<T> {
         refine: T::DEFAULT_REFINE,
         method: QpMethod::Auto,
         polish: T::DEFAULT_POLISH,
+    };
+
+    /// Every setting zero (`max_iter` 0): the settings of a zero-filled solver
+    /// ([`QpSolver::ZEROED`]) until real ones are set.
+    pub(crate) const ZERO: Self = QpSettings {
+        max_iter: 0,
+        tol_stat: T::ZERO,
+        tol_eq: T::ZERO,
+        tol_ineq: T::ZERO,
+        tol_comp: T::ZERO,
+        reg: T::ZERO,
+        warm_start: false,
+        warm_start_dual: false,
+        mu0: T::ZERO,
+        refine: 0,
+        method: QpMethod::Auto,
+        polish: false,
     };
 }
 
@@ -562,6 +596,14 @@ impl<
         lc: [[crate::zeros(); NC]; NC],
         gc: [crate::zeros(); NC],
         xc: [crate::zeros(); NC],
+    };
+
+    /// [`NEW`](Self::NEW) with every setting zero (`max_iter` 0; set [`settings`](Self::settings)
+    /// before solving): all of it zero bits, so a `static` of it is zero-filled memory (`.bss`)
+    /// rather than an initial image in flash.
+    pub(crate) const ZEROED: Self = QpSolver {
+        settings: QpSettings::ZERO,
+        ..Self::NEW
     };
 
     /// Whether the last [`prepare`](Self::prepare) condensed the QP (see [`QpMethod`]).

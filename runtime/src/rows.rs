@@ -50,16 +50,17 @@ pub(crate) enum BoundError {
 }
 
 impl<T: Real, const K: usize> Rows<T, K> {
+    /// All zeros (no bounds): every solve sets the slacks and multipliers before using them
+    /// (`init`, `warm_init`), and zero bits keep a solver in a `static` out of flash.
     pub const NEW: Self = {
         let z = crate::zeros::<T, K, 1>();
-        let one = crate::filled::<T, K, 1>(T::ONE);
         Rows {
             lo: z,
             hi: z,
             has_lo: [false; K],
             has_hi: [false; K],
-            tl: one,
-            tu: one,
+            tl: z,
+            tu: z,
             ll: z,
             lu: z,
             ri_l: z,

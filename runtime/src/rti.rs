@@ -59,6 +59,14 @@ impl<T: Real> RtiSettings<T> {
         sqp_max_iter: 50,
         sqp_tol: T::SQP_TOL,
     };
+
+    /// Every setting zero (no QP iteration, no SQP iteration): [`Rti::unconfigured`]'s.
+    pub(crate) const ZERO: Self = RtiSettings {
+        qp: QpSettings::ZERO,
+        shift: false,
+        sqp_max_iter: 0,
+        sqp_tol: T::ZERO,
+    };
 }
 
 /// Outcome of a control step or a full SQP solve.
@@ -86,6 +94,23 @@ pub struct RtiInfo<T> {
     pub qp: QpInfo<T>,
     /// SQP iterations (1 for a real-time iteration).
     pub sqp_iterations: u32,
+}
+
+impl<T: Real> RtiInfo<T> {
+    /// Status `Ok`, no iteration, zero residuals: a placeholder before the first solve (its
+    /// bits are all zero, so it keeps a solver in a `static` zero-filled).
+    pub const EMPTY: Self = RtiInfo {
+        status: RtiStatus::Ok,
+        qp: QpInfo {
+            status: QpStatus::Solved,
+            iterations: 0,
+            res_stat: T::ZERO,
+            res_eq: T::ZERO,
+            res_ineq: T::ZERO,
+            mu: T::ZERO,
+        },
+        sqp_iterations: 0,
+    };
 }
 
 /// Why a setter refused its input.
@@ -232,14 +257,42 @@ impl<
     const NC: usize,
 > Rti<T, M, NX, NU, NP, NY, NYN, NG, NGN, N, NC>
 {
-    /// A solver with zero trajectory, parameters, references and weights and no bounds.
-    /// `const`, so it can initialize a `static`.
+    /// A solver with zero trajectory, parameters, references and weights, no bounds and the
+    /// default settings. `const`, so it can initialize a `static`.
     pub const fn new(model: M) -> Self {
+        Self::build(model, false)
+    }
+
+    /// A solver with every field zero: the settings (no QP iteration), the bounds (every
+    /// state and control fixed at 0), the weights. A `static` initialized with it is
+    /// zero-filled memory (`.bss`) instead of an initial image of the whole solver in flash
+    /// (for QR-bench A in f32, 57 KB; [`new`](Self::new)'s infinite bounds and settings are
+    /// not zeros). Unusable until configured: set the settings, the bounds
+    /// ([`set_bounds`](Self::set_bounds), [`set_constraint_bounds`](Self::set_constraint_bounds)),
+    /// the weights, parameters and guess; a generated `Solver::configure` does all of it.
+    pub const fn unconfigured(model: M) -> Self {
+        Self::build(model, true)
+    }
+
+    const fn build(model: M, zero: bool) -> Self {
+        let (lo, hi) = if zero {
+            (T::ZERO, T::ZERO)
+        } else {
+            (T::NEG_INF, T::INF)
+        };
         Rti {
             model,
-            settings: RtiSettings::DEFAULT,
-            qp: OcpQp::NEW,
-            solver: QpSolver::NEW,
+            settings: if zero {
+                RtiSettings::ZERO
+            } else {
+                RtiSettings::DEFAULT
+            },
+            qp: if zero { OcpQp::ZEROED } else { OcpQp::NEW },
+            solver: if zero {
+                QpSolver::ZEROED
+            } else {
+                QpSolver::NEW
+            },
             x: [crate::zeros(); N],
             xn: crate::zeros(),
             u: [crate::zeros(); N],
@@ -249,16 +302,16 @@ impl<
             yref_n: crate::zeros(),
             w: crate::zeros(),
             wn: crate::zeros(),
-            w_diag: true,
-            wn_diag: true,
-            lbx: crate::filled(T::NEG_INF),
-            ubx: crate::filled(T::INF),
-            lbu: crate::filled(T::NEG_INF),
-            ubu: crate::filled(T::INF),
-            lg: crate::filled(T::NEG_INF),
-            ug: crate::filled(T::INF),
-            lgn: crate::filled(T::NEG_INF),
-            ugn: crate::filled(T::INF),
+            w_diag: !zero,
+            wn_diag: !zero,
+            lbx: crate::filled(lo),
+            ubx: crate::filled(hi),
+            lbu: crate::filled(lo),
+            ubu: crate::filled(hi),
+            lg: crate::filled(lo),
+            ug: crate::filled(hi),
+            lgn: crate::filled(lo),
+            ugn: crate::filled(hi),
             l1: crate::zeros(),
             l2: crate::zeros(),
             l1n: crate::zeros(),

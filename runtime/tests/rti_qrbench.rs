@@ -5,7 +5,7 @@ mod support;
 
 use mpc_runtime::{QpMethod, RtiStatus};
 use nalgebra::SVector;
-use support::quadrotor::{NU, NX, X0, plant, qrbench, qrbench_in};
+use support::quadrotor::{NU, NX, X0, plant, qrbench, qrbench_in, qrbench_unconfigured};
 
 /// Rows of an anchor CSV: state (10) and control (4, absent in the last row).
 fn anchor(name: &str) -> Vec<(SVector<f64, NX>, Option<SVector<f64, NU>>)> {
@@ -197,4 +197,39 @@ fn gauss_newton_terms_match_j_w_j_for_diagonal_and_dense_weights() {
         assert!((st.gx - jx.transpose() * w * (y - yref)).amax() < tol * 10.0);
         assert!((st.gu - ju.transpose() * w * (y - yref)).amax() < tol * 10.0);
     }
+}
+
+/// `Rti::unconfigured` (every field zero, so that a `static` of it is zero-filled memory)
+/// configured like `Rti::new` flies the same closed loop bit for bit, with either QP method
+/// and in f32; left unconfigured it still returns a finite control (the fallback), never a
+/// solved status.
+#[test]
+fn unconfigured_then_configured_is_new() {
+    fn fly<T: mpc_runtime::Real, const NC: usize>() {
+        let dt = 0.04;
+        let mut a = qrbench_in::<T, 10, NC>(dt);
+        let mut b = qrbench_unconfigured::<T, 10, NC>(dt);
+        let x0 = SVector::<f64, NX>::from(X0);
+        let mut x = x0;
+        for k in 0..100 {
+            let xt = x.map(T::lit);
+            a.prepare();
+            b.prepare();
+            let (ua, ia) = a.feedback(&xt);
+            let (ub, ib) = b.feedback(&xt);
+            assert_eq!(ia.status, RtiStatus::Ok, "step {k}");
+            assert_eq!((ua, ia), (ub, ib), "step {k}");
+            x = plant(&x, &ua.map(|v| v.to_f64()), dt, 10);
+        }
+        let mut raw = Box::new(support::quadrotor::QrSolver::<T, 10, NC>::unconfigured(
+            support::quadrotor::Quadrotor { dt: T::lit(dt) },
+        ));
+        raw.prepare();
+        let (u, info) = raw.feedback(&x0.map(T::lit));
+        assert_ne!(info.status, RtiStatus::Ok);
+        assert!(u.iter().all(|v| v.finite()), "{u}");
+    }
+    fly::<f64, 0>();
+    fly::<f64, 10>();
+    fly::<f32, 10>();
 }

@@ -182,8 +182,26 @@ pub fn qrbench<const N: usize>(dt: f64) -> Box<QrSolver<f64, N>> {
 /// A QR-bench solver: weights `W = diag(Q, R)`, `W_N = 5 Q`, the hover reference at (4, 0, 2)
 /// on every stage, the control bounds, and the first guess `x_k = x0`, `u_k = 0`.
 pub fn qrbench_in<T: Real, const N: usize, const NC: usize>(dt: f64) -> Box<QrSolver<T, N, NC>> {
+    let mut s = Box::new(QrSolver::<T, N, NC>::new(Quadrotor { dt: T::lit(dt) }));
+    configure(&mut s);
+    s
+}
+
+/// [`qrbench_in`] from [`Rti::unconfigured`](mpc_runtime::Rti::unconfigured) (every field
+/// zero): the default settings, then the same configuration.
+pub fn qrbench_unconfigured<T: Real, const N: usize, const NC: usize>(
+    dt: f64,
+) -> Box<QrSolver<T, N, NC>> {
+    let mut s = Box::new(QrSolver::<T, N, NC>::unconfigured(Quadrotor {
+        dt: T::lit(dt),
+    }));
+    s.settings = mpc_runtime::RtiSettings::DEFAULT;
+    configure(&mut s);
+    s
+}
+
+fn configure<T: Real, const N: usize, const NC: usize>(s: &mut QrSolver<T, N, NC>) {
     let c = |v: f64| T::lit(v);
-    let mut s = Box::new(QrSolver::<T, N, NC>::new(Quadrotor { dt: c(dt) }));
     let mut w = SMatrix::<T, NY, NY>::zeros();
     let mut wn = SMatrix::<T, NX, NX>::zeros();
     for (i, q) in q_diag().iter().enumerate() {
@@ -210,5 +228,4 @@ pub fn qrbench_in<T: Real, const N: usize, const NC: usize>(dt: f64) -> Box<QrSo
     .expect("bounds");
     s.set_guess(&SVector::from_fn(|i, _| c(X0[i])), &SVector::zeros())
         .expect("guess");
-    s
 }
