@@ -921,8 +921,10 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
         /// The runtime solver this crate instantiates.
         pub type Rti = mpc_runtime::Rti<Real, Model, NX, NU, NP, NY, NYN, NG, NGN, N, NC>;
 
-        const P0: SVector<Real, NP> =
-            SVector::from_array_storage(mpc_runtime::nalgebra::ArrayStorage([P_DEFAULT]));
+        const P_ZERO: SVector<Real, NP> =
+            SVector::from_array_storage(mpc_runtime::nalgebra::ArrayStorage([[0.0; NP]]));
+        const U_ZERO: SVector<Real, NU> =
+            SVector::from_array_storage(mpc_runtime::nalgebra::ArrayStorage([[0.0; NU]]));
         const X0: SVector<Real, NX_MODEL> = SVector::from_array_storage(
             mpc_runtime::nalgebra::ArrayStorage([[0.0; NX_MODEL]]),
         );
@@ -941,7 +943,10 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
             p: [SVector<Real, NP>; #n1],
             x0: SVector<Real, NX_MODEL>,
             u0: SVector<Real, NU>,
-            info: Option<RtiInfo<Real>>,
+            /// The last feedback's or SQP solve's outcome, valid once `solved` (not an
+            /// `Option`: its `None` is not zero bits, see [`unconfigured`](Self::unconfigured)).
+            info: RtiInfo<Real>,
+            solved: bool,
         }
 
         impl Default for Solver {
@@ -951,15 +956,17 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
         }
 
         impl Solver {
-            /// A solver with zero weights and no bounds, `const` so it can initialize a
-            /// `static`; call [`configure`](Self::configure) before use.
+            /// A solver with every field zero (settings, weights, bounds, parameters), `const`
+            /// so it can initialize a `static`, which is then zero-filled memory (`.bss`), not
+            /// an image of the solver in flash; call [`configure`](Self::configure) before use.
             pub const fn unconfigured() -> Self {
                 Solver {
-                    rti: Rti::new(Model),
-                    p: [P0; #n1],
+                    rti: Rti::unconfigured(Model),
+                    p: [P_ZERO; #n1],
                     x0: X0,
-                    u0: U0,
-                    info: None,
+                    u0: U_ZERO,
+                    info: RtiInfo::EMPTY,
+                    solved: false,
                 }
             }
 
@@ -988,7 +995,8 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
                 self.rti.set_guess(&SVector::from(X_GUESS), &SVector::from(U_GUESS))?;
                 self.x0 = self.rti.state(0).map_or(X0, |x| x.fixed_rows::<NX_MODEL>(0).into_owned());
                 self.u0 = U0;
-                self.info = None;
+                self.info = RtiInfo::EMPTY;
+                self.solved = false;
                 Ok(())
             }
 
@@ -1103,7 +1111,8 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
                 let x0 = self.x0_aug();
                 let (u, info) = self.rti.feedback(&x0);
                 self.u0 = u;
-                self.info = Some(info);
+                self.info = info;
+                self.solved = true;
                 #rate_update
                 info
             }
@@ -1116,7 +1125,8 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
                 if let Some(u) = self.rti.control(0).filter(|u| u.iter().all(|e| e.is_finite())) {
                     self.u0 = *u;
                 }
-                self.info = Some(info);
+                self.info = info;
+                self.solved = true;
                 info
             }
 
@@ -1146,7 +1156,7 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
             /// Status and statistics of the last feedback or SQP solve (`None` before the
             /// first).
             pub fn stats(&self) -> Option<RtiInfo<Real>> {
-                self.info
+                self.solved.then_some(self.info)
             }
         }
     }
