@@ -130,6 +130,12 @@ fn parse(out: &str, machine: &str) -> Report {
         calib.contains("= 100000 ticks"),
         "{machine}: SysTick does not count 40 instructions per tick: {calib}"
     );
+    // The solver's static is zero-filled memory, not an image in flash.
+    assert!(
+        out.lines()
+            .any(|l| l.starts_with("solver:") && l.ends_with(" in .bss")),
+        "{machine}: the solver is not in .bss:\n{out}"
+    );
     let mut iterations = Vec::new();
     for (k, line) in out.lines().filter(|l| l.starts_with("step ")).enumerate() {
         assert_eq!(
@@ -150,14 +156,19 @@ fn parse(out: &str, machine: &str) -> Report {
         iterations.push(it);
     }
     assert_eq!(iterations.len(), STEPS, "{machine}: step count:\n{out}");
+    // The final state as the hex bits of each f32 (the firmware has no float formatting).
     let xs = out
         .lines()
-        .find_map(|l| l.strip_prefix("x_final=["))
+        .find_map(|l| l.strip_prefix("x_final_bits=["))
         .and_then(|l| l.strip_suffix(']'))
-        .unwrap_or_else(|| panic!("{machine}: no x_final line:\n{out}"));
+        .unwrap_or_else(|| panic!("{machine}: no x_final_bits line:\n{out}"));
     let v: Vec<Real> = xs
         .split(',')
-        .map(|e| e.trim().parse().expect("x_final entry is a number"))
+        .map(|e| {
+            u32::from_str_radix(e.trim(), 16)
+                .map(Real::from_bits)
+                .expect("x_final_bits entry is hexadecimal")
+        })
         .collect();
     let x_final: [Real; NX_MODEL] = v.try_into().expect("x_final has 10 entries");
     Report {
