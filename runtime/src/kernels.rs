@@ -28,6 +28,62 @@ pub(crate) fn mul_sparse<T: Real, const R: usize, const K: usize, const C: usize
     mul_impl::<T, R, K, C, { !cfg!(target_feature = "avx") }>(a, b)
 }
 
+/// `out = a * b`, skipping the zero entries of `b` (as [`mul_sparse`]) except with AVX,
+/// written in place: each column is summed in a local array and stored once, so no
+/// matrix-sized temporary is copied (for the stage matrices, up to `NX x NX`).
+#[inline(always)]
+pub(crate) fn mul_sparse_into<T: Real, const R: usize, const K: usize, const C: usize>(
+    out: &mut SMatrix<T, R, C>,
+    a: &SMatrix<T, R, K>,
+    b: &SMatrix<T, K, C>,
+) {
+    let (ad, bd) = (&a.data.0, &b.data.0);
+    for (o, bcol) in out.data.0.iter_mut().zip(bd) {
+        let mut col = [T::ZERO; R];
+        for (&bkj, acol) in bcol.iter().zip(ad) {
+            if !cfg!(target_feature = "avx") && bkj == T::ZERO {
+                continue;
+            }
+            for (c, &aik) in col.iter_mut().zip(acol) {
+                *c += aik * bkj;
+            }
+        }
+        *o = col;
+    }
+}
+
+/// `m <- (m + m') / 2` in place: each pair of entries is replaced by its mean, computed as
+/// `(a + b) * 0.5` (the same bits as the out-of-place formula).
+#[inline(always)]
+pub(crate) fn symmetrize<T: Real, const K: usize>(m: &mut SMatrix<T, K, K>) {
+    let d = &mut m.data.0;
+    for j in 0..K {
+        for i in j + 1..K {
+            let v = (d[j][i] + d[i][j]) * T::lit(0.5);
+            d[j][i] = v;
+            d[i][j] = v;
+        }
+    }
+}
+
+/// `(diag(w) m)'` for a diagonal `w`: row `i` of `m` scaled by `w_ii`, transposed, in one
+/// pass.
+#[inline(always)]
+pub(crate) fn scaled_transpose<T: Real, const K: usize, const C: usize>(
+    w: &SMatrix<T, K, K>,
+    m: &SMatrix<T, K, C>,
+) -> SMatrix<T, C, K> {
+    let (wd, md) = (&w.data.0, &m.data.0);
+    let mut out = [[T::ZERO; C]; K];
+    for (i, o) in out.iter_mut().enumerate() {
+        let d = wd[i][i];
+        for (j, oj) in o.iter_mut().enumerate() {
+            *oj = md[j][i] * d;
+        }
+    }
+    SMatrix::from_array_storage(nalgebra::ArrayStorage(out))
+}
+
 /// `a * b` column by column (axpy form), skipping zero entries of `b` if `SKIP`.
 #[inline(always)]
 fn mul_impl<T: Real, const R: usize, const K: usize, const C: usize, const SKIP: bool>(
@@ -149,6 +205,16 @@ mod tests {
         sparse[(3, 1)] = 0.0;
         assert_eq!(mul_sparse(&a, &sparse), mul(&a, &sparse));
         assert!((mul_sparse(&a, &sparse) - a * sparse).amax() < 1e-12);
+        let mut into = SMatrix::<f64, 3, 2>::repeat(7.0);
+        mul_sparse_into(&mut into, &a, &sparse);
+        assert_eq!(into, mul(&a, &sparse));
+        let w =
+            SMatrix::<f64, 4, 4>::from_diagonal(&SMatrix::<f64, 4, 1>::new(1.0, -2.0, 0.5, 3.0));
+        assert!((scaled_transpose(&w, &b) - (w * b).transpose()).amax() < 1e-12);
+        let mut sq = SMatrix::<f64, 3, 3>::from_fn(|i, j| (i * 3 + j) as f64 * 0.3 - 1.0);
+        let want = (sq + sq.transpose()) * 0.5;
+        symmetrize(&mut sq);
+        assert_eq!(sq, want);
         assert!((tr_mul(&a, &c) - a.transpose() * c).amax() < 1e-12);
         let d = SMatrix::<f64, 2, 4>::from_fn(|i, j| (3 * i + j) as f64 * 0.7 - 1.1);
         assert!((mul_tr(&a, &d) - a * d.transpose()).amax() < 1e-12);

@@ -15,7 +15,7 @@
 
 use nalgebra::{SMatrix, SVector};
 
-use crate::kernels::{mul, mul_sparse};
+use crate::kernels::{mul, mul_sparse_into, scaled_transpose};
 use crate::model::Model;
 use crate::qp::{OcpQp, QpInfo, QpSettings, QpSolver, QpStatus};
 use crate::real::Real;
@@ -547,7 +547,6 @@ impl<
     }
 
     fn linearize(&mut self) {
-        let (w, wn) = (self.w, self.wn);
         for k in 0..N {
             let (x, u, p) = (self.x[k], self.u[k], self.p[k]);
             let next = if k + 1 < N { self.x[k + 1] } else { self.xn };
@@ -557,17 +556,20 @@ impl<
             let mut jx = SMatrix::<T, NY, NX>::zeros();
             let mut ju = SMatrix::<T, NY, NU>::zeros();
             let r = self.model.residual(&x, &u, &p, &mut jx, &mut ju) - self.yref[k];
-            let (wjx, wju) = if self.w_diag {
-                (scale_rows(&w, &jx), scale_rows(&w, &ju))
+            // (WJ)' (a diagonal W scales J's rows), then J'WJ as (WJ)'J: the Jacobian on the
+            // right, where its zeros are skipped (a residual that selects states and
+            // controls is mostly zeros), written into the stage in place.
+            let (wjxt, wjut) = if self.w_diag {
+                (
+                    scaled_transpose(&self.w, &jx),
+                    scaled_transpose(&self.w, &ju),
+                )
             } else {
-                (w * jx, w * ju)
+                ((self.w * jx).transpose(), (self.w * ju).transpose())
             };
-            // J'WJ as (WJ)'J: the Jacobian on the right, where its zeros are skipped (a
-            // residual that selects states and controls is mostly zeros).
-            let (wjxt, wjut) = (wjx.transpose(), wju.transpose());
-            s.q = mul_sparse(&wjxt, &jx);
-            s.s = mul_sparse(&wjut, &jx);
-            s.r = mul_sparse(&wjut, &ju);
+            mul_sparse_into(&mut s.q, &wjxt, &jx);
+            mul_sparse_into(&mut s.s, &wjut, &jx);
+            mul_sparse_into(&mut s.r, &wjut, &ju);
             s.gx = mul(&wjxt, &r);
             s.gu = mul(&wjut, &r);
             s.lbx = self.lbx - x;
@@ -584,13 +586,12 @@ impl<
         let t = &mut self.qp.terminal;
         let mut jx = SMatrix::<T, NYN, NX>::zeros();
         let r = self.model.terminal_residual(&xn, &pn, &mut jx) - self.yref_n;
-        let wjx = if self.wn_diag {
-            scale_rows(&wn, &jx)
+        let wjxt = if self.wn_diag {
+            scaled_transpose(&self.wn, &jx)
         } else {
-            wn * jx
+            (self.wn * jx).transpose()
         };
-        let wjxt = wjx.transpose();
-        t.q = mul_sparse(&wjxt, &jx);
+        mul_sparse_into(&mut t.q, &wjxt, &jx);
         t.gx = mul(&wjxt, &r);
         t.lbx = self.lbx - xn;
         t.ubx = self.ubx - xn;
@@ -818,19 +819,4 @@ fn is_diagonal<T: Real, const R: usize>(m: &SMatrix<T, R, R>) -> bool {
     m.iter()
         .enumerate()
         .all(|(idx, &v)| idx % R == idx / R || v == T::ZERO)
-}
-
-/// `diag(w) * m`: row `i` of `m` scaled by `w[(i, i)]`.
-fn scale_rows<T: Real, const R: usize, const C: usize>(
-    w: &SMatrix<T, R, R>,
-    m: &SMatrix<T, R, C>,
-) -> SMatrix<T, R, C> {
-    let mut out = *m;
-    for i in 0..R {
-        let d = w[(i, i)];
-        for j in 0..C {
-            out[(i, j)] *= d;
-        }
-    }
-    out
 }

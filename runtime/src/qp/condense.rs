@@ -28,7 +28,9 @@
 //! stationarity conditions (there are no state bounds), backwards.
 
 use super::{Mat, OcpQp, QpMethod, QpSolver, Vect, condensing_pays, regularized_cholesky};
-use crate::kernels::{add_mul_sum, mul, mul_sparse, mul_tr, sub_mul_tr_sum, tr_mul};
+use crate::kernels::{
+    add_mul_sum, mul, mul_sparse, mul_sparse_into, mul_tr, sub_mul_tr_sum, symmetrize, tr_mul,
+};
 use crate::real::Real;
 use crate::rows::Rhs;
 
@@ -92,17 +94,19 @@ impl<
             let pf = pv + mul(&p, &s.f);
             self.hc[k][k] = s.r + mul_sparse(&pbt, &s.b);
             for j in k + 1..NC {
-                self.hc[j][k] = mul_sparse(&self.xc[j], &s.b);
+                mul_sparse_into(&mut self.hc[j][k], &self.xc[j], &s.b);
                 self.gc[j] += mul(&self.xc[j], &s.f);
-                self.xc[j] = mul_sparse(&self.xc[j], &s.a);
+                let x = self.xc[j];
+                mul_sparse_into(&mut self.xc[j], &x, &s.a);
             }
             self.gc[k] = s.gu + tr_mul(&s.b, &pf);
             self.xc[k] = s.s + mul_sparse(&pbt, &s.a);
             if k > 0 {
                 pv = s.gx + tr_mul(&s.a, &pf);
-                let pa = mul_sparse(&p, &s.a);
-                let pk = s.q + mul_sparse(&pa.transpose(), &s.a);
-                p = (pk + pk.transpose()) * T::lit(0.5);
+                let pat = mul_sparse(&p, &s.a).transpose();
+                mul_sparse_into(&mut p, &pat, &s.a);
+                p += s.q;
+                symmetrize(&mut p);
             }
         }
         true
