@@ -55,6 +55,7 @@ pub(crate) fn mul_sparse_into<T: Real, const R: usize, const K: usize, const C: 
 /// `m <- (m + m') / 2` in place: each pair of entries is replaced by its mean, computed as
 /// `(a + b) * 0.5` (the same bits as the out-of-place formula).
 #[inline(always)]
+#[allow(clippy::needless_range_loop)] // the pairs (i, j), (j, i): an index pattern
 pub(crate) fn symmetrize<T: Real, const K: usize>(m: &mut SMatrix<T, K, K>) {
     let d = &mut m.data.0;
     for j in 0..K {
