@@ -28,6 +28,43 @@ pub(crate) fn mul_sparse<T: Real, const R: usize, const K: usize, const C: usize
     mul_impl::<T, R, K, C, { !cfg!(target_feature = "avx") }>(a, b)
 }
 
+/// `y += x a`, four entries at a time written out, then the rest: no loop the compiler has
+/// to unroll, so the kernels stay compact and fast at every optimization level (at
+/// `opt-level = "s"`, which unrolls nothing, a loop of four would cost its counter per
+/// entry).
+#[inline(always)]
+fn axpy<T: Real, const R: usize>(y: &mut [T; R], x: &[T; R], a: T) {
+    let (y4, yr) = y.as_chunks_mut::<4>();
+    let (x4, xr) = x.as_chunks::<4>();
+    for (y, x) in y4.iter_mut().zip(x4) {
+        y[0] += x[0] * a;
+        y[1] += x[1] * a;
+        y[2] += x[2] * a;
+        y[3] += x[3] * a;
+    }
+    for (y, &x) in yr.iter_mut().zip(xr) {
+        *y += x * a;
+    }
+}
+
+/// `sum_k x_k y_k`, summed in order (`k` increasing), four terms at a time written out.
+#[inline(always)]
+fn dot<T: Real, const K: usize>(x: &[T; K], y: &[T; K]) -> T {
+    let (x4, xr) = x.as_chunks::<4>();
+    let (y4, yr) = y.as_chunks::<4>();
+    let mut s = T::ZERO;
+    for (x, y) in x4.iter().zip(y4) {
+        s += x[0] * y[0];
+        s += x[1] * y[1];
+        s += x[2] * y[2];
+        s += x[3] * y[3];
+    }
+    for (&x, &y) in xr.iter().zip(yr) {
+        s += x * y;
+    }
+    s
+}
+
 /// `out = a * b`, skipping the zero entries of `b` (as [`mul_sparse`]) except with AVX,
 /// written in place: each column is summed in a local array and stored once, so no
 /// matrix-sized temporary is copied (for the stage matrices, up to `NX x NX`).
@@ -44,9 +81,7 @@ pub(crate) fn mul_sparse_into<T: Real, const R: usize, const K: usize, const C: 
             if !cfg!(target_feature = "avx") && bkj == T::ZERO {
                 continue;
             }
-            for (c, &aik) in col.iter_mut().zip(acol) {
-                *c += aik * bkj;
-            }
+            axpy(&mut col, acol, bkj);
         }
         *o = col;
     }
@@ -99,9 +134,7 @@ fn mul_impl<T: Real, const R: usize, const K: usize, const C: usize, const SKIP:
             if SKIP && bkj == T::ZERO {
                 continue;
             }
-            for i in 0..R {
-                out[j][i] += ad[k][i] * bkj;
-            }
+            axpy(&mut out[j], &ad[k], bkj);
         }
     }
     SMatrix::from_array_storage(nalgebra::ArrayStorage(out))
@@ -117,11 +150,7 @@ pub(crate) fn tr_mul<T: Real, const K: usize, const R: usize, const C: usize>(
     let mut out = [[T::ZERO; R]; C];
     for j in 0..C {
         for i in 0..R {
-            let mut s = T::ZERO;
-            for k in 0..K {
-                s += ad[i][k] * bd[j][k];
-            }
-            out[j][i] = s;
+            out[j][i] = dot(&ad[i], &bd[j]);
         }
     }
     SMatrix::from_array_storage(nalgebra::ArrayStorage(out))
@@ -137,10 +166,7 @@ pub(crate) fn mul_tr<T: Real, const R: usize, const K: usize, const C: usize>(
     let mut out = [[T::ZERO; R]; C];
     for j in 0..C {
         for k in 0..K {
-            let bjk = bd[k][j];
-            for i in 0..R {
-                out[j][i] += ad[k][i] * bjk;
-            }
+            axpy(&mut out[j], &ad[k], bd[k][j]);
         }
     }
     SMatrix::from_array_storage(nalgebra::ArrayStorage(out))
@@ -158,10 +184,8 @@ pub(crate) fn sub_mul_tr_sum<T: Real, const R: usize, const K: usize, const C: u
         let (ad, bd) = (&am.data.0, &bm.data.0);
         for k in 0..K {
             for j in 0..C {
-                let bjk = bd[k][j];
-                for i in 0..R {
-                    out[j][i] -= ad[k][i] * bjk;
-                }
+                // `y + x (-b)` is `y - x b`, bit for bit.
+                axpy(&mut out[j], &ad[k], -bd[k][j]);
             }
         }
     }
@@ -180,10 +204,7 @@ pub(crate) fn add_mul_sum<T: Real, const R: usize, const K: usize>(
     for (am, vm) in a.iter().zip(v) {
         let (ad, vd) = (&am.data.0, &vm.data.0[0]);
         for k in 0..K {
-            let vk = vd[k];
-            for i in 0..R {
-                out[i] += ad[k][i] * vk;
-            }
+            axpy(&mut out, &ad[k], vd[k]);
         }
     }
     for i in 0..R {
