@@ -74,9 +74,34 @@ pub(crate) fn mul_sparse_into<T: Real, const R: usize, const K: usize, const C: 
     a: &SMatrix<T, R, K>,
     b: &SMatrix<T, K, C>,
 ) {
+    mul_sparse_into_impl::<T, R, K, C, false>(out, a, b);
+}
+
+/// `out += a * b`, as [`mul_sparse_into`] (each column's terms added to it in order).
+#[inline(always)]
+pub(crate) fn mul_sparse_add_into<T: Real, const R: usize, const K: usize, const C: usize>(
+    out: &mut SMatrix<T, R, C>,
+    a: &SMatrix<T, R, K>,
+    b: &SMatrix<T, K, C>,
+) {
+    mul_sparse_into_impl::<T, R, K, C, true>(out, a, b);
+}
+
+#[inline(always)]
+fn mul_sparse_into_impl<
+    T: Real,
+    const R: usize,
+    const K: usize,
+    const C: usize,
+    const ADD: bool,
+>(
+    out: &mut SMatrix<T, R, C>,
+    a: &SMatrix<T, R, K>,
+    b: &SMatrix<T, K, C>,
+) {
     let (ad, bd) = (&a.data.0, &b.data.0);
     for (o, bcol) in out.data.0.iter_mut().zip(bd) {
-        let mut col = [T::ZERO; R];
+        let mut col = if ADD { *o } else { [T::ZERO; R] };
         for (&bkj, acol) in bcol.iter().zip(ad) {
             if !cfg!(target_feature = "avx") && bkj == T::ZERO {
                 continue;
@@ -84,6 +109,21 @@ pub(crate) fn mul_sparse_into<T: Real, const R: usize, const K: usize, const C: 
             axpy(&mut col, acol, bkj);
         }
         *o = col;
+    }
+}
+
+/// `out += a' * b`, each entry's dot product (summed in order) added to it.
+#[inline(always)]
+pub(crate) fn tr_mul_add_into<T: Real, const K: usize, const R: usize, const C: usize>(
+    out: &mut SMatrix<T, R, C>,
+    a: &SMatrix<T, K, R>,
+    b: &SMatrix<T, K, C>,
+) {
+    let (ad, bd) = (&a.data.0, &b.data.0);
+    for (o, bcol) in out.data.0.iter_mut().zip(bd) {
+        for (oi, acol) in o.iter_mut().zip(ad) {
+            *oi += dot(acol, bcol);
+        }
     }
 }
 
@@ -230,6 +270,11 @@ mod tests {
         let mut into = SMatrix::<f64, 3, 2>::repeat(7.0);
         mul_sparse_into(&mut into, &a, &sparse);
         assert_eq!(into, mul(&a, &sparse));
+        mul_sparse_add_into(&mut into, &a, &b);
+        assert!((into - a * sparse - a * b).amax() < 1e-12);
+        let mut acc = SMatrix::<f64, 4, 2>::repeat(-1.0);
+        tr_mul_add_into(&mut acc, &a, &c);
+        assert!((acc - SMatrix::repeat(-1.0) - a.transpose() * c).amax() < 1e-12);
         let w =
             SMatrix::<f64, 4, 4>::from_diagonal(&SMatrix::<f64, 4, 1>::new(1.0, -2.0, 0.5, 3.0));
         assert!((scaled_transpose(&w, &b) - (w * b).transpose()).amax() < 1e-12);

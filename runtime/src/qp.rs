@@ -35,7 +35,7 @@
 
 use nalgebra::{SMatrix, SVector};
 
-use crate::kernels::{mul_sparse, tr_mul};
+use crate::kernels::{mul_sparse, mul_sparse_add_into, symmetrize, tr_mul, tr_mul_add_into};
 use crate::real::Real;
 use crate::rows::{BoundError, Rhs, Rows, Soft};
 
@@ -1033,16 +1033,25 @@ impl<
         let pn = t.q
             + Mat::<T, NX, NX>::from_diagonal(&self.rxn.sigma(None))
             + t.c.transpose() * Mat::<T, NGN, NGN>::from_diagonal(&sg) * t.c;
-        let mut p = (pn + pn.transpose()) * T::lit(0.5);
+        // P_{k+1} is built in place in pn[k] (P_N first), read there by stage k, which
+        // builds P_k in pn[k - 1].
+        let Some(last) = self.pn.last_mut() else {
+            return true;
+        };
+        *last = pn;
+        symmetrize(last);
         for k in (0..N).rev() {
             let s = &qp.stages[k];
-            self.pn[k] = p;
+            let (done, rest) = self.pn.split_at_mut(k);
+            let Some(p) = rest.first() else {
+                return false;
+            };
             let sig_g = Mat::<T, NG, NG>::from_diagonal(&self.rg[k].sigma(Some(&self.sg[k])));
             let dts = s.d.transpose() * sig_g;
             // Products with A and B on the right, where their zeros are skipped: with P
             // symmetric, B'PB = (PB)'B, B'PA = (PB)'A, A'PA = (PA)'A.
-            let pa = mul_sparse(&p, &s.a);
-            let pbt = mul_sparse(&p, &s.b).transpose();
+            let pa = mul_sparse(p, &s.a);
+            let pbt = mul_sparse(p, &s.b).transpose();
             let rbar = s.r
                 + Mat::<T, NU, NU>::from_diagonal(&self.ru[k].sigma(None))
                 + dts * s.d
@@ -1055,12 +1064,13 @@ impl<
             self.l[k] = chol.unpack();
             self.sbar[k] = sbar;
             self.kmat[k] = kmat;
-            if k > 0 {
-                let qt = s.q
+            if let Some(pk) = done.last_mut() {
+                *pk = s.q
                     + Mat::<T, NX, NX>::from_diagonal(&self.rx[k].sigma(None))
                     + s.c.transpose() * sig_g * s.c;
-                let pk = qt + mul_sparse(&pa.transpose(), &s.a) + tr_mul(&sbar, &kmat);
-                p = (pk + pk.transpose()) * T::lit(0.5);
+                mul_sparse_add_into(pk, &pa.transpose(), &s.a);
+                tr_mul_add_into(pk, &sbar, &kmat);
+                symmetrize(pk);
             }
             if !finite_mat(&self.kmat[k]) {
                 return false;
