@@ -462,10 +462,13 @@ pub struct QpSolver<
     condensed: bool,
     /// The last solution is the polished one.
     polished: bool,
-    /// Condensed Hessian blocks `H_ij` (`i >= j`), the Cholesky factor of `H + Sigma`, the
-    /// gradient at `x0 = 0` and its derivative by `x0` (`g = gc + xc x0`).
-    hc: [[Mat<T, NU, NU>; NC]; NC],
-    lc: [[Mat<T, NU, NU>; NC]; NC],
+    /// Condensed Hessian and the Cholesky factor of `H + Sigma`, sharing one array of blocks:
+    /// `H_ij` (`i > j`) at `[j][i]`, above the diagonal, and the factor's `L_ij` at `[i][j]`,
+    /// below it; the diagonal blocks apart (`hd`: `H_ii`, `ld`: `L_ii^-1`). The gradient at
+    /// `x0 = 0` and its derivative by `x0` (`g = gc + xc x0`).
+    tri: [[Mat<T, NU, NU>; NC]; NC],
+    hd: [Mat<T, NU, NU>; NC],
+    ld: [Mat<T, NU, NU>; NC],
     gc: [Vect<T, NU>; NC],
     xc: [Mat<T, NU, NX>; NC],
 }
@@ -592,8 +595,9 @@ impl<
             false
         },
         polished: false,
-        hc: [[crate::zeros(); NC]; NC],
-        lc: [[crate::zeros(); NC]; NC],
+        tri: [[crate::zeros(); NC]; NC],
+        hd: [crate::zeros(); NC],
+        ld: [crate::zeros(); NC],
         gc: [crate::zeros(); NC],
         xc: [crate::zeros(); NC],
     };

@@ -29,7 +29,8 @@
 
 use super::{Mat, OcpQp, QpMethod, QpSolver, Vect, condensing_pays, regularized_cholesky};
 use crate::kernels::{
-    add_mul_sum, mul, mul_sparse, mul_sparse_into, mul_tr, sub_mul_tr_sum, symmetrize, tr_mul,
+    add_mul_sum, mul, mul_sparse, mul_sparse_add_into, mul_sparse_into, mul_tr, sub_mul_tr_sum,
+    symmetrize, tr_mul, tr_mul_add_into,
 };
 use crate::real::Real;
 use crate::rows::Rhs;
@@ -74,7 +75,7 @@ impl<
         stages && free(&t.lbx, &t.ubx) && free(&t.lg, &t.ug)
     }
 
-    /// Builds `hc`, `gc`, `xc` (module docs). Returns `false` (and the Riccati recursion is
+    /// Builds `H` (`hd`, above the diagonal of `tri`), `gc`, `xc` (module docs). Returns `false` (and the Riccati recursion is
     /// used) if `NC != N`.
     pub(super) fn condense(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N>) -> bool {
         if NC != N {
@@ -92,9 +93,9 @@ impl<
             let pb = mul_sparse(&p, &s.b);
             let pbt = pb.transpose();
             let pf = pv + mul(&p, &s.f);
-            self.hc[k][k] = s.r + mul_sparse(&pbt, &s.b);
+            self.hd[k] = s.r + mul_sparse(&pbt, &s.b);
             for j in k + 1..NC {
-                mul_sparse_into(&mut self.hc[j][k], &self.xc[j], &s.b);
+                mul_sparse_into(&mut self.tri[k][j], &self.xc[j], &s.b);
                 self.gc[j] += mul(&self.xc[j], &s.f);
                 let x = self.xc[j];
                 mul_sparse_into(&mut self.xc[j], &x, &s.a);
@@ -119,12 +120,16 @@ impl<
         }
     }
 
-    /// `sum_j H_ij v_j` for block row `i` (`H` is stored as its lower block triangle).
+    /// `sum_j H_ij v_j` for block row `i` (`H_ij`, `i > j`, is stored at `tri[j][i]`, and
+    /// `H_ij = H_ji'` above the diagonal).
     fn hessian_row(&self, i: usize, v: &[Vect<T, NU>; N]) -> Vect<T, NU> {
         let mut h = Vect::<T, NU>::zeros();
-        add_mul_sum(&mut h, T::ONE, &self.hc[i][..=i], &v[..=i]);
-        for (hj, vj) in self.hc.iter().zip(v).skip(i + 1) {
-            h += tr_mul(&hj[i], vj);
+        for (row, vj) in self.tri.iter().zip(v).take(i) {
+            mul_sparse_add_into(&mut h, &row[i], vj);
+        }
+        mul_sparse_add_into(&mut h, &self.hd[i], &v[i]);
+        for (hji, vj) in self.tri[i].iter().zip(v).skip(i + 1) {
+            tr_mul_add_into(&mut h, hji, vj);
         }
         h
     }
@@ -148,24 +153,26 @@ impl<
         [rs / scale, T::ZERO, ri, comp]
     }
 
-    /// Block Cholesky factorization `L L' = H + Sigma` into `lc`; see [`block_cholesky`].
+    /// Block Cholesky factorization `L L' = H + Sigma` into `ld` and below the diagonal of
+    /// `tri`; see [`block_cholesky`].
     pub(super) fn condensed_factorize(&mut self) -> bool {
         for j in 0..NC.min(N) {
-            self.lc[j][j] = self.hc[j][j] + Mat::from_diagonal(&self.ru[j].sigma(None));
+            self.ld[j] = self.hd[j] + Mat::from_diagonal(&self.ru[j].sigma(None));
         }
         self.block_cholesky(false)
     }
 
-    /// In-place block Cholesky factorization of the symmetric matrix whose lower block
-    /// triangle is in `lc` (diagonal blocks from `lc`, the blocks below them from `hc`
-    /// unless `below_in_lc`), each diagonal block regularized as in the Riccati recursion.
-    /// The diagonal blocks are stored inverted (`lc[j][j] = L_jj^-1`), so that every later
-    /// use is a product.
-    fn block_cholesky(&mut self, below_in_lc: bool) -> bool {
+    /// In-place block Cholesky factorization of the symmetric matrix whose diagonal blocks
+    /// are in `ld` and whose blocks below them are `H`'s (above the diagonal of `tri`) or,
+    /// if `below_in_tri`, already below the diagonal of `tri`; each diagonal block
+    /// regularized as in the Riccati recursion. The factor replaces them: `L_ij` below the
+    /// diagonal of `tri`, the diagonal blocks inverted (`ld[j] = L_jj^-1`), so that every later
+    /// use is a product. `H` itself is kept.
+    fn block_cholesky(&mut self, below_in_tri: bool) -> bool {
         let n = NC.min(N);
         for j in 0..n {
-            let mut d = self.lc[j][j];
-            let lj = &self.lc[j][..j];
+            let mut d = self.ld[j];
+            let lj = &self.tri[j][..j];
             sub_mul_tr_sum(&mut d, lj, lj);
             let Some(chol) = regularized_cholesky(d, self.settings.reg) else {
                 return false;
@@ -175,16 +182,16 @@ impl<
                 return false;
             }
             for i in j + 1..n {
-                let mut m = if below_in_lc {
-                    self.lc[i][j]
+                let mut m = if below_in_tri {
+                    self.tri[i][j]
                 } else {
-                    self.hc[i][j]
+                    self.tri[j][i]
                 };
-                sub_mul_tr_sum(&mut m, &self.lc[i][..j], &self.lc[j][..j]);
+                sub_mul_tr_sum(&mut m, &self.tri[i][..j], &self.tri[j][..j]);
                 // L_ij L_jj' = M.
-                self.lc[i][j] = mul_tr(&m, &inv);
+                self.tri[i][j] = mul_tr(&m, &inv);
             }
-            self.lc[j][j] = inv;
+            self.ld[j] = inv;
         }
         true
     }
@@ -194,15 +201,15 @@ impl<
         let n = NC.min(N);
         for i in 0..n {
             let mut y = v[i];
-            add_mul_sum(&mut y, -T::ONE, &self.lc[i][..i], &v[..i]);
-            v[i] = mul(&self.lc[i][i], &y);
+            add_mul_sum(&mut y, -T::ONE, &self.tri[i][..i], &v[..i]);
+            v[i] = mul(&self.ld[i], &y);
         }
         for i in (0..n).rev() {
             let mut y = v[i];
-            for (lk, vk) in self.lc.iter().zip(v.iter()).skip(i + 1) {
+            for (lk, vk) in self.tri.iter().zip(v.iter()).skip(i + 1) {
                 y -= tr_mul(&lk[i], vk);
             }
-            v[i] = tr_mul(&self.lc[i][i], &y);
+            v[i] = tr_mul(&self.ld[i], &y);
         }
     }
 
@@ -268,7 +275,7 @@ impl<
             for k in 0..n {
                 let r = &self.ru[k];
                 for i in 0..NU {
-                    let h = self.hc[k][k][(i, i)].max(T::EPSILON);
+                    let h = self.hd[k][(i, i)].max(T::EPSILON);
                     let step = v[k][i] - mu[k][i] / h;
                     let lo = r.has_lo[i] && step < r.lo[i];
                     let hi = !lo && r.has_hi[i] && step > r.hi[i];
@@ -331,7 +338,7 @@ impl<
         let fixed = |k: usize, i: usize| lower[k][i] || upper[k][i];
         for i in 0..n {
             for j in 0..=i {
-                let mut m = self.hc[i][j];
+                let mut m = if i == j { self.hd[i] } else { self.tri[j][i] };
                 for p in 0..NU {
                     for q in 0..NU {
                         if fixed(i, p) || fixed(j, q) {
@@ -339,7 +346,11 @@ impl<
                         }
                     }
                 }
-                self.lc[i][j] = m;
+                if i == j {
+                    self.ld[i] = m;
+                } else {
+                    self.tri[i][j] = m;
+                }
             }
         }
         if !self.block_cholesky(true) {
