@@ -521,16 +521,14 @@ fn regularized_cholesky<T: Real, const K: usize>(
 /// `0` exactly when all are (one branch-free pass; this check runs on every QP's data). Eight
 /// independent sums, so the pass vectorizes (one sum would be a chain of dependent adds).
 fn finite_mat<T: Real, const R: usize, const C: usize>(m: &Mat<T, R, C>) -> bool {
-    const LANES: usize = 8;
-    let mut acc = [T::ZERO; LANES];
-    let data = m.as_slice();
-    let mut chunks = data.chunks_exact(LANES);
-    for c in &mut chunks {
+    let (chunks, rest) = m.as_slice().as_chunks::<8>();
+    let mut acc = [T::ZERO; 8];
+    for c in chunks {
         for (a, &v) in acc.iter_mut().zip(c) {
             *a += v * T::ZERO;
         }
     }
-    for (a, &v) in acc.iter_mut().zip(chunks.remainder()) {
+    for (a, &v) in acc.iter_mut().zip(rest) {
         *a += v * T::ZERO;
     }
     acc.iter().fold(T::ZERO, |s, &a| s + a) == T::ZERO

@@ -75,8 +75,8 @@ impl<
         stages && free(&t.lbx, &t.ubx) && free(&t.lg, &t.ug)
     }
 
-    /// Builds `H` (`hd`, above the diagonal of `tri`), `gc`, `xc` (module docs). Returns `false` (and the Riccati recursion is
-    /// used) if `NC != N`.
+    /// Builds `H` (`hd`, above the diagonal of `tri`), `gc`, `xc` (module docs). Returns
+    /// `false` (and the Riccati recursion is used) if `NC != N`.
     pub(super) fn condense(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N>) -> bool {
         if NC != N {
             return false;
