@@ -266,8 +266,8 @@ impl<
     /// A solver with every field zero: the settings (no QP iteration), the bounds (every
     /// state and control fixed at 0), the weights. A `static` initialized with it is
     /// zero-filled memory (`.bss`) instead of an initial image of the whole solver in flash
-    /// (for QR-bench A in f32, 57 KB; [`new`](Self::new)'s infinite bounds and settings are
-    /// not zeros). Unusable until configured: set the settings, the bounds
+    /// ([`new`](Self::new)'s infinite bounds and settings are not zeros). Unusable until
+    /// configured: set the settings, the bounds
     /// ([`set_bounds`](Self::set_bounds), [`set_constraint_bounds`](Self::set_constraint_bounds)),
     /// the weights, parameters and guess; a generated `Solver::configure` does all of it.
     pub const fn unconfigured(model: M) -> Self {
