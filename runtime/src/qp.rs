@@ -40,6 +40,9 @@ use crate::real::Real;
 use crate::rows::{BoundError, Rhs, Rows, Soft};
 
 mod condense;
+mod polish;
+
+use polish::{ActiveSet, weights};
 
 type Mat<T, const R: usize, const C: usize> = SMatrix<T, R, C>;
 type Vect<T, const R: usize> = SVector<T, R>;
@@ -248,13 +251,15 @@ pub struct QpSettings<T> {
     pub refine: u32,
     /// How the Newton systems are solved: Riccati recursion or condensing (see [`QpMethod`]).
     pub method: QpMethod,
-    /// After a condensed QP is solved, refine the solution by primal-dual active-set
-    /// iterations started from the interior point's (each solves the QP with the bounds
-    /// taken as active held as equalities and the others dropped; at most 4, one
-    /// factorization each), and keep the result if it satisfies every bound and its
-    /// multipliers have the right signs (else the interior point's; see
-    /// [`QpSolver::polished`]). Active bounds end exactly on their values; the residuals
-    /// reported stay the interior point's. Default: [`Real::DEFAULT_POLISH`].
+    /// After a QP is solved, refine the solution by primal-dual active-set iterations
+    /// started from the interior point's (each solves the QP with the rows taken as active
+    /// held as equalities and the others dropped, one factorization each: at most 4 for a
+    /// condensed QP, 50 for the Riccati recursion), and keep the result if it satisfies
+    /// every bound and its multipliers have the right signs (else the interior point's; see
+    /// [`QpSolver::polished`]). Active rows end on their values; the residuals reported
+    /// stay the interior point's. QPs with soft rows are not polished, nor are QPs solved
+    /// by the Riccati recursion in a solver with condensing storage (`NC = N`). Default:
+    /// [`Real::DEFAULT_POLISH`].
     pub polish: bool,
 }
 
@@ -738,11 +743,18 @@ impl<
     /// recursion was chosen; [`solve`](Self::solve) is the safe call).
     pub fn solve_prepared(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N>) -> QpInfo<T> {
         let info = self.iterate(qp);
+        let polish = self.settings.polish && info.status == QpStatus::Solved;
         if self.condensed && info.status != QpStatus::NonFiniteInput {
-            if self.settings.polish && info.status == QpStatus::Solved {
+            if polish {
                 self.polished = self.condensed_polish();
             }
             self.expand(qp);
+        } else if polish && NC == 0 {
+            // Not for solvers with condensing storage, whose QPs are condensed but when a
+            // state bound or general row appears: that keeps this polish (11 KB of code on
+            // a Cortex-M4F, which has 1 KB to spare under its 64 KiB target) out of their
+            // builds.
+            self.polished = self.riccati_polish(qp);
         }
         info
     }
@@ -860,7 +872,7 @@ impl<
             if self.max_multiplier() > diverge {
                 return self.info(QpStatus::Infeasible, iter, res);
             }
-            if !self.factorize(qp) {
+            if !self.factorize(qp, None) {
                 return self.info(QpStatus::NumericalError, iter, res);
             }
             // Predictor.
@@ -1022,8 +1034,14 @@ impl<
         [rs / gscale, re, ri, comp]
     }
 
-    /// Backward Riccati factorization of the Newton system's Hessian.
-    fn factorize(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N>) -> bool {
+    /// Backward Riccati factorization of the Newton system's Hessian: the interior point's
+    /// (`active` `None`: each row's barrier weight `sigma`), or the polish's (the rows of
+    /// the active set with its penalty weight, the others none).
+    fn factorize(
+        &mut self,
+        qp: &OcpQp<T, NX, NU, NG, NGN, N>,
+        active: Option<&ActiveSet<T, NX, NU, NG, NGN, N>>,
+    ) -> bool {
         if N == 0 {
             return true;
         }
@@ -1031,10 +1049,13 @@ impl<
             return self.condensed_factorize();
         }
         let t = &qp.terminal;
-        let sg = self.rgn.sigma(Some(&self.sgn));
-        let pn = t.q
-            + Mat::<T, NX, NX>::from_diagonal(&self.rxn.sigma(None))
-            + t.c.transpose() * Mat::<T, NGN, NGN>::from_diagonal(&sg) * t.c;
+        let sg = weights(&self.rgn, Some(&self.sgn), active.map(|a| (&a.gn, a.w)));
+        let pn =
+            t.q + Mat::<T, NX, NX>::from_diagonal(&weights(
+                &self.rxn,
+                None,
+                active.map(|a| (&a.xn, a.w)),
+            )) + t.c.transpose() * Mat::<T, NGN, NGN>::from_diagonal(&sg) * t.c;
         // P_{k+1} is built in place in pn[k] (P_N first), read there by stage k, which
         // builds P_k in pn[k - 1].
         let Some(last) = self.pn.last_mut() else {
@@ -1048,16 +1069,23 @@ impl<
             let Some(p) = rest.first() else {
                 return false;
             };
-            let sig_g = Mat::<T, NG, NG>::from_diagonal(&self.rg[k].sigma(Some(&self.sg[k])));
+            let sig_g = Mat::<T, NG, NG>::from_diagonal(&weights(
+                &self.rg[k],
+                Some(&self.sg[k]),
+                active.map(|a| (&a.g[k], a.w)),
+            ));
             let dts = s.d.transpose() * sig_g;
             // Products with A and B on the right, where their zeros are skipped: with P
             // symmetric, B'PB = (PB)'B, B'PA = (PB)'A, A'PA = (PA)'A.
             let pa = mul_sparse(p, &s.a);
             let pbt = mul_sparse(p, &s.b).transpose();
-            let rbar = s.r
-                + Mat::<T, NU, NU>::from_diagonal(&self.ru[k].sigma(None))
-                + dts * s.d
-                + mul_sparse(&pbt, &s.b);
+            let rbar =
+                s.r + Mat::<T, NU, NU>::from_diagonal(&weights(
+                    &self.ru[k],
+                    None,
+                    active.map(|a| (&a.u[k], a.w)),
+                )) + dts * s.d
+                    + mul_sparse(&pbt, &s.b);
             let sbar = s.s + dts * s.c + mul_sparse(&pbt, &s.a);
             let Some(chol) = regularized_cholesky(rbar, self.settings.reg) else {
                 return false;
@@ -1067,9 +1095,12 @@ impl<
             self.sbar[k] = sbar;
             self.kmat[k] = kmat;
             if let Some(pk) = done.last_mut() {
-                *pk = s.q
-                    + Mat::<T, NX, NX>::from_diagonal(&self.rx[k].sigma(None))
-                    + s.c.transpose() * sig_g * s.c;
+                *pk =
+                    s.q + Mat::<T, NX, NX>::from_diagonal(&weights(
+                        &self.rx[k],
+                        None,
+                        active.map(|a| (&a.x[k], a.w)),
+                    )) + s.c.transpose() * sig_g * s.c;
                 mul_sparse_add_into(pk, &pa.transpose(), &s.a);
                 tr_mul_add_into(pk, &sbar, &kmat);
                 symmetrize(pk);

@@ -79,10 +79,81 @@ macro_rules! against_clarabel {
                 let info = solver.solve(&qp);
                 let err = solved_error(&info, &solver.settings, solver.solution(), &reference)?;
                 prop_assert!(err <= 1e-7, "f64 differs from clarabel by {err:e} (relative)");
+                // Polished (off by default in f64): the same solution, on the active rows.
+                let mut polished = solver.clone();
+                polished.settings.polish = true;
+                prop_assert_eq!(polished.solve(&qp).status, QpStatus::Solved);
+                prop_assert!(polished.polished(), "the polished solution was refused");
+                let ps = polished.solution();
+                let pxs: Vec<_> = (0..=$n).map(|k| *ps.state(k).unwrap()).collect();
+                let err = compare(&reference, &ps.u, &pxs);
+                prop_assert!(err <= 1e-7, "polished differs from clarabel by {err:e} (relative)");
             }
         }
     };
 }
+
+/// The Riccati recursion in `f32` at its default settings (polish on) on random QPs with
+/// state bounds and general constraints, against clarabel on the same rounded data, over a
+/// fixed set of 100 draws (odd seeds: `seed | 1` is the generator's state): every draw
+/// within 1e-2 relative, at least 97 % within 1e-3 and polished (all of them are, today;
+/// the figures are printed). Without the polish (`solver.settings.polish = false` added
+/// below) 168 of the 342 judged draws are within 1e-3, the worst 1.6e-2 off: the interior
+/// point stops at f32's complementarity tolerance, `1e-4`. A draw whose active-set
+/// iteration does not settle in 50 rounds keeps the interior point's solution.
+macro_rules! f32_against_clarabel {
+    ($name:ident, $nx:literal, $nu:literal, $ng:literal, $ngn:literal, $n:literal) => {
+        #[test]
+        fn $name() {
+            let (mut judged, mut within, mut polished, mut worst) = (0, 0, 0, 0.0f64);
+            for seed in (0..100u64).map(|i| 2 * i + 1) {
+                let qp32 = cast_qp::<f64, f32, $nx, $nu, $ng, $ngn, $n>(&random_qp(seed));
+                let qp64 = cast_qp::<f32, f64, $nx, $nu, $ng, $ngn, $n>(&qp32);
+                let Some(reference) = clarabel_solve(&qp64) else {
+                    continue;
+                };
+                // As against_clarabel: nearly degenerate draws are not judged.
+                if reference.strict_complementarity <= 1e-3 {
+                    continue;
+                }
+                let mut solver = Box::new(QpSolver::<f32, $nx, $nu, $ng, $ngn, $n>::NEW);
+                let info = solver.solve(&qp32);
+                assert_eq!(info.status, QpStatus::Solved, "seed {seed}: {info:?}");
+                let sol = solver.solution();
+                let us: Vec<SVector<f64, $nu>> = sol.u.iter().map(|u| u.cast()).collect();
+                let xs: Vec<SVector<f64, $nx>> =
+                    (0..=$n).map(|k| sol.state(k).unwrap().cast()).collect();
+                let err = compare(&reference, &us, &xs);
+                assert!(
+                    err <= 1e-2,
+                    "seed {seed}: f32 differs from clarabel by {err:e}"
+                );
+                judged += 1;
+                within += usize::from(err <= 1e-3);
+                polished += usize::from(solver.polished());
+                worst = worst.max(err);
+            }
+            println!(
+                "{}: {judged} judged, {within} within 1e-3, {polished} polished, worst {worst:.2e}",
+                stringify!($name)
+            );
+            assert!(judged >= 50, "only {judged} draws judged");
+            assert!(
+                100 * within >= 97 * judged,
+                "{within} of {judged} within 1e-3"
+            );
+            assert!(
+                100 * polished >= 97 * judged,
+                "{polished} of {judged} polished"
+            );
+        }
+    };
+}
+
+f32_against_clarabel!(f32_small_n5, 2, 1, 1, 0, 5);
+f32_against_clarabel!(f32_medium_n10, 4, 2, 2, 1, 10);
+f32_against_clarabel!(f32_qrbench_sized_n20, 10, 4, 0, 0, 20);
+f32_against_clarabel!(f32_large_n30, 12, 5, 3, 2, 30);
 
 /// Condensing: random QPs with control bounds only (the states' bounds of [`random_qp`]
 /// removed, no general rows), solved condensed, against clarabel to 1e-7 like the Riccati
@@ -149,11 +220,19 @@ fn cast_mat<A: Real, B: Real, const R: usize, const C: usize>(
     m.map(|v| B::lit(v.to_f64()))
 }
 
-/// A control-bounded QP in another precision (rounded to f32, or such data back in f64).
-fn cast_qp<A: Real, B: Real, const NX: usize, const NU: usize, const N: usize>(
-    qp: &OcpQp<A, NX, NU, 0, 0, N>,
-) -> OcpQp<B, NX, NU, 0, 0, N> {
-    let mut out = OcpQp::<B, NX, NU, 0, 0, N>::NEW;
+/// A QP in another precision (rounded to f32, or such data back in f64).
+fn cast_qp<
+    A: Real,
+    B: Real,
+    const NX: usize,
+    const NU: usize,
+    const NG: usize,
+    const NGN: usize,
+    const N: usize,
+>(
+    qp: &OcpQp<A, NX, NU, NG, NGN, N>,
+) -> OcpQp<B, NX, NU, NG, NGN, N> {
+    let mut out = OcpQp::<B, NX, NU, NG, NGN, N>::NEW;
     out.x0 = cast_mat(&qp.x0);
     for (o, s) in out.stages.iter_mut().zip(&qp.stages) {
         (o.q, o.s, o.r) = (cast_mat(&s.q), cast_mat(&s.s), cast_mat(&s.r));
@@ -161,10 +240,15 @@ fn cast_qp<A: Real, B: Real, const NX: usize, const NU: usize, const N: usize>(
         (o.a, o.b, o.f) = (cast_mat(&s.a), cast_mat(&s.b), cast_mat(&s.f));
         (o.lbx, o.ubx) = (cast_mat(&s.lbx), cast_mat(&s.ubx));
         (o.lbu, o.ubu) = (cast_mat(&s.lbu), cast_mat(&s.ubu));
+        (o.c, o.d) = (cast_mat(&s.c), cast_mat(&s.d));
+        (o.lg, o.ug) = (cast_mat(&s.lg), cast_mat(&s.ug));
+        (o.soft_l1, o.soft_l2) = (cast_mat(&s.soft_l1), cast_mat(&s.soft_l2));
     }
     let (o, t) = (&mut out.terminal, &qp.terminal);
     (o.q, o.gx) = (cast_mat(&t.q), cast_mat(&t.gx));
     (o.lbx, o.ubx) = (cast_mat(&t.lbx), cast_mat(&t.ubx));
+    (o.c, o.lg, o.ug) = (cast_mat(&t.c), cast_mat(&t.lg), cast_mat(&t.ug));
+    (o.soft_l1, o.soft_l2) = (cast_mat(&t.soft_l1), cast_mat(&t.soft_l2));
     out
 }
 
@@ -177,8 +261,8 @@ macro_rules! condensed_f32_against_clarabel {
             #![proptest_config(ProptestConfig { cases: 12, ..ProptestConfig::default() })]
             #[test]
             fn $name(seed in any::<u64>()) {
-                let qp32 = cast_qp::<f64, f32, $nx, $nu, $n>(&control_bounded_qp(seed));
-                let reference = clarabel_solve(&cast_qp::<f32, f64, $nx, $nu, $n>(&qp32));
+                let qp32 = cast_qp::<f64, f32, $nx, $nu, 0, 0, $n>(&control_bounded_qp(seed));
+                let reference = clarabel_solve(&cast_qp::<f32, f64, $nx, $nu, 0, 0, $n>(&qp32));
                 prop_assume!(reference.is_some(), "clarabel found no reference solution");
                 let reference = reference.unwrap();
                 prop_assume!(reference.strict_complementarity > 1e-3, "nearly degenerate solution");
@@ -208,6 +292,7 @@ condensed_against_clarabel!(condensed_qrbench_sized_n10, 10, 4, 10);
 condensed_against_clarabel!(condensed_n20, 6, 3, 20);
 
 against_clarabel!(small_n5, 2, 1, 1, 0, 5);
+
 against_clarabel!(medium_n10, 4, 2, 2, 1, 10);
 against_clarabel!(qrbench_sized_n20, 10, 4, 0, 0, 20);
 against_clarabel!(large_n30, 12, 5, 3, 2, 30);

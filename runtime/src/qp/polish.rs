@@ -1,0 +1,477 @@
+//! Active-set polish of a solution of the Riccati recursion ([`QpSettings::polish`]), for
+//! QPs with state bounds and general constraints (a condensed QP has its own, on the
+//! control bounds alone: see `condense.rs`).
+//!
+//! An interior point stops with every active row about `mu / lam` off its bound; in `f32`,
+//! whose complementarity tolerance is `1e-4`, a weakly active row can be off by `1e-2`. The
+//! polish takes the rows whose multiplier exceeds their slack as the active set and solves
+//! the QP with those rows held as equalities and the others dropped,
+//!
+//! ```text
+//! min 1/2 z'H z + g'z   s.t. dynamics,  a_i'z = b_i  (i active)
+//! ```
+//!
+//! by iterative refinement on its KKT system with the Riccati recursion: each active row gets
+//! the penalty weight `w = 1 / delta` in the Newton system's Hessian (`delta = sqrt(eps)`),
+//! which makes the factorization that of the KKT system regularized by `-delta I` in the
+//! multipliers' block, `H dz + A'(pi) - a'dy = -r_s`, `a'dz + delta dy = -r_a`; the
+//! residuals `r_s` (stationarity), `r_a` (the active rows' distance to their bounds) and the
+//! dynamics residual are those of the unregularized system, so the iteration converges to
+//! its solution, with the multipliers `y` of the active rows. Rows whose multiplier turns to
+//! the wrong sign are then dropped and rows the solution violates added, and the QP solved
+//! again (one factorization each), until the sets repeat. The result replaces the interior
+//! point's only if it satisfies every bound, every active row's multiplier has its sign, and
+//! its stationarity and dynamics residuals meet the tolerances; else the interior point's
+//! solution is kept. QPs with soft rows are not polished.
+
+use super::{OcpQp, QpSolver, Vect};
+use crate::kernels::tr_mul;
+use crate::real::Real;
+use crate::rows::{Rows, Soft};
+
+/// Active-set rounds at most (each one factorization).
+const ROUNDS: usize = 50;
+
+/// Refinement steps per round (each one Riccati solve with the round's factorization).
+const REFINE_STEPS: usize = 10;
+
+/// Which side of a row the polish holds as an equality.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Side {
+    Free,
+    Lower,
+    Upper,
+}
+
+/// The polish's active set, per row set of each stage, and the penalty weight of an active
+/// row in the factorization.
+pub(super) struct ActiveSet<
+    T: Real,
+    const NX: usize,
+    const NU: usize,
+    const NG: usize,
+    const NGN: usize,
+    const N: usize,
+> {
+    pub x: [[Side; NX]; N],
+    pub u: [[Side; NU]; N],
+    pub g: [[Side; NG]; N],
+    pub xn: [Side; NX],
+    pub gn: [Side; NGN],
+    pub w: T,
+}
+
+/// Multipliers of the active rows (`lam_l - lam_u`, zero on free rows), or other values per
+/// row.
+#[derive(Clone, Copy)]
+struct Duals<
+    T: Real,
+    const NX: usize,
+    const NU: usize,
+    const NG: usize,
+    const NGN: usize,
+    const N: usize,
+> {
+    x: [Vect<T, NX>; N],
+    u: [Vect<T, NU>; N],
+    g: [Vect<T, NG>; N],
+    xn: Vect<T, NX>,
+    gn: Vect<T, NGN>,
+}
+
+impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usize, const N: usize>
+    Duals<T, NX, NU, NG, NGN, N>
+{
+    const ZERO: Self = Duals {
+        x: [crate::zeros(); N],
+        u: [crate::zeros(); N],
+        g: [crate::zeros(); N],
+        xn: crate::zeros(),
+        gn: crate::zeros(),
+    };
+}
+
+/// `v` on the active rows, zero on the free ones.
+fn on<T: Real, const K: usize>(sides: &[Side; K], v: &Vect<T, K>) -> Vect<T, K> {
+    let mut a = *v;
+    for (ai, side) in a.iter_mut().zip(sides) {
+        if *side == Side::Free {
+            *ai = T::ZERO;
+        }
+    }
+    a
+}
+
+/// The weights a row set adds to the Hessian along its rows: the interior point's barrier
+/// weights (`active` `None`), or the polish's, `w` on the active rows and none elsewhere.
+pub(super) fn weights<T: Real, const K: usize>(
+    rows: &Rows<T, K>,
+    soft: Option<&Soft<T, K>>,
+    active: Option<(&[Side; K], T)>,
+) -> Vect<T, K> {
+    match active {
+        None => rows.sigma(soft),
+        Some((sides, w)) => {
+            let mut v = Vect::<T, K>::zeros();
+            for (vi, side) in v.iter_mut().zip(sides) {
+                if *side != Side::Free {
+                    *vi = w;
+                }
+            }
+            v
+        }
+    }
+}
+
+/// The interior point's active sides: those whose multiplier exceeds their slack.
+fn initial_sides<T: Real, const K: usize>(r: &Rows<T, K>) -> [Side; K] {
+    let mut sides = [Side::Free; K];
+    for (i, side) in sides.iter_mut().enumerate() {
+        let lower = r.has_lo[i] && r.ll[i] > r.tl[i];
+        let upper = r.has_hi[i] && r.lu[i] > r.tu[i];
+        *side = match (lower, upper) {
+            (true, true) if r.lu[i] > r.ll[i] => Side::Upper,
+            (true, _) => Side::Lower,
+            (false, true) => Side::Upper,
+            (false, false) => Side::Free,
+        };
+    }
+    sides
+}
+
+/// The interior point's multipliers on the active rows, zero on the others.
+fn initial_duals<T: Real, const K: usize>(r: &Rows<T, K>, sides: &[Side; K]) -> Vect<T, K> {
+    let mut y = r.dual();
+    for (yi, side) in y.iter_mut().zip(sides) {
+        if *side == Side::Free {
+            *yi = T::ZERO;
+        }
+    }
+    y
+}
+
+/// Distance of the active rows' values `v` from their bounds (zero on free rows).
+fn gaps<T: Real, const K: usize>(r: &Rows<T, K>, sides: &[Side; K], v: &Vect<T, K>) -> Vect<T, K> {
+    let mut d = Vect::<T, K>::zeros();
+    for (i, side) in sides.iter().enumerate() {
+        d[i] = match side {
+            Side::Free => T::ZERO,
+            Side::Lower => v[i] - r.lo[i],
+            Side::Upper => v[i] - r.hi[i],
+        };
+    }
+    d
+}
+
+/// How far a row is from agreeing with its place in the active set, relative to
+/// `max(1, |.|)`: an active row's multiplier of the wrong sign, a free row's violation of a
+/// bound by its value `v` (with the side it violates); zero if it agrees.
+fn disagreement<T: Real, const K: usize>(
+    r: &Rows<T, K>,
+    side: Side,
+    i: usize,
+    y: &Vect<T, K>,
+    v: &Vect<T, K>,
+) -> (T, Side) {
+    let (yi, vi) = (y[i], v[i]);
+    let (ys, vs) = (T::ONE.max(yi.abs()), T::ONE.max(vi.abs()));
+    match side {
+        Side::Lower if yi < T::ZERO => (-yi / ys, Side::Free),
+        Side::Upper if yi > T::ZERO => (yi / ys, Side::Free),
+        Side::Free if r.has_lo[i] && vi < r.lo[i] => ((r.lo[i] - vi) / vs, Side::Lower),
+        Side::Free if r.has_hi[i] && vi > r.hi[i] => ((vi - r.hi[i]) / vs, Side::Upper),
+        same => (T::ZERO, same),
+    }
+}
+
+/// Moves the rows whose [`disagreement`] exceeds `tol` and is at least `at_least` to where
+/// it says (a freed row's multiplier set to zero); returns the largest disagreement over
+/// the rows (moved or not) and whether any row moved.
+fn update_sides<T: Real, const K: usize>(
+    r: &Rows<T, K>,
+    sides: &mut [Side; K],
+    y: &mut Vect<T, K>,
+    v: &Vect<T, K>,
+    tol: T,
+    at_least: T,
+) -> (T, bool) {
+    let (mut worst, mut moved) = (T::ZERO, false);
+    for i in 0..K {
+        let Some(side) = sides.get_mut(i) else {
+            break;
+        };
+        let (d, new) = disagreement(r, *side, i, y, v);
+        worst = worst.max(d);
+        if d > tol && d >= at_least {
+            *side = new;
+            y[i] = T::ZERO;
+            moved = true;
+        }
+    }
+    (worst, moved)
+}
+
+/// Largest absolute entry.
+fn amax<T: Real, const K: usize>(v: &Vect<T, K>) -> T {
+    v.iter().fold(T::ZERO, |m, x| m.max(x.abs()))
+}
+
+impl<
+    T: Real,
+    const NX: usize,
+    const NU: usize,
+    const NG: usize,
+    const NGN: usize,
+    const N: usize,
+    const NC: usize,
+> QpSolver<T, NX, NU, NG, NGN, N, NC>
+{
+    /// The polish of the module docs after a solve by the Riccati recursion; returns whether
+    /// its result replaced the solution in `sol`.
+    // Not inlined: its arrays stay out of the stack frame of a solve that does not polish.
+    #[inline(never)]
+    pub(super) fn riccati_polish(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N>) -> bool {
+        if N == 0 || self.sg.iter().any(|s| s.any) || self.sgn.any {
+            return false;
+        }
+        let w = T::ONE / T::EPSILON.sqrt();
+        let mut act = ActiveSet {
+            x: [[Side::Free; NX]; N],
+            u: [[Side::Free; NU]; N],
+            g: [[Side::Free; NG]; N],
+            xn: initial_sides(&self.rxn),
+            gn: initial_sides(&self.rgn),
+            w,
+        };
+        let mut y = Duals {
+            x: [Vect::<T, NX>::zeros(); N],
+            u: [Vect::<T, NU>::zeros(); N],
+            g: [Vect::<T, NG>::zeros(); N],
+            xn: initial_duals(&self.rxn, &act.xn),
+            gn: initial_duals(&self.rgn, &act.gn),
+        };
+        for k in 0..N {
+            act.x[k] = initial_sides(&self.rx[k]);
+            act.u[k] = initial_sides(&self.ru[k]);
+            act.g[k] = initial_sides(&self.rg[k]);
+            y.x[k] = initial_duals(&self.rx[k], &act.x[k]);
+            y.u[k] = initial_duals(&self.ru[k], &act.u[k]);
+            y.g[k] = initial_duals(&self.rg[k], &act.g[k]);
+        }
+        let interior = self.sol;
+        let tol = self.settings.tol_ineq.max(self.settings.tol_stat);
+        let mut settled = false;
+        for round in 0..ROUNDS {
+            if !self.factorize(qp, Some(&act)) {
+                break;
+            }
+            for _ in 0..REFINE_STEPS {
+                self.polish_step(qp, &act, &mut y);
+            }
+            // Settled when no row disagrees by more than the tolerance. The first round moves
+            // every row that disagrees; later ones only the row that disagrees most, since
+            // moving many at once cycles on some QPs (random QPs with general rows).
+            let worst = self.move_rows(qp, &mut act, &mut y, tol, T::INF).0;
+            if worst <= tol {
+                settled = true;
+                break;
+            }
+            let at_least = if round == 0 { tol } else { worst };
+            self.move_rows(qp, &mut act, &mut y, tol, at_least);
+        }
+        let (stat, eq) = self.polish_residuals(qp, &y);
+        let ok = settled
+            && stat <= self.settings.tol_stat
+            && eq <= self.settings.tol_eq
+            && self.sol.x.iter().all(|x| x.iter().all(|v| v.finite()))
+            && self.sol.u.iter().all(|u| u.iter().all(|v| v.finite()))
+            && self.sol.xn.iter().all(|v| v.finite());
+        if !ok {
+            self.sol = interior;
+        }
+        ok
+    }
+
+    /// One refinement step: the residuals of the active-set QP's KKT system at the current
+    /// point, the Riccati solve of the regularized system for the correction, and the
+    /// update of states, controls, dynamics multipliers and the active rows' multipliers.
+    fn polish_step(
+        &mut self,
+        qp: &OcpQp<T, NX, NU, NG, NGN, N>,
+        act: &ActiveSet<T, NX, NU, NG, NGN, N>,
+        y: &mut Duals<T, NX, NU, NG, NGN, N>,
+    ) {
+        let w = act.w;
+        // The right-hand side: the stationarity residual H z + g + (dynamics)'pi - a'y plus
+        // a' w r_a, and the dynamics residual; the solve gives the corrections of z and pi.
+        let mut wr = Duals::<T, NX, NU, NG, NGN, N>::ZERO;
+        for k in 0..N {
+            let s = &qp.stages[k];
+            let (x, u) = (self.sol.x[k], self.sol.u[k]);
+            let xnext = if k + 1 < N {
+                self.sol.x[k + 1]
+            } else {
+                self.sol.xn
+            };
+            self.rbt[k] = s.a * x + s.b * u + s.f - xnext;
+            wr.x[k] = gaps(&self.rx[k], &act.x[k], &x) * w;
+            wr.u[k] = gaps(&self.ru[k], &act.u[k], &u) * w;
+            wr.g[k] = gaps(&self.rg[k], &act.g[k], &(s.c * x + s.d * u)) * w;
+            let tg = wr.g[k] - y.g[k];
+            let pi = self.sol.pi[k];
+            self.gut[k] =
+                s.r * u + s.s * x + s.gu + wr.u[k] - y.u[k] + tr_mul(&s.d, &tg) + tr_mul(&s.b, &pi);
+            if k > 0 {
+                self.gxt[k] = s.q * x + tr_mul(&s.s, &u) + s.gx + wr.x[k] - y.x[k]
+                    + tr_mul(&s.c, &tg)
+                    + tr_mul(&s.a, &pi)
+                    - self.sol.pi[k - 1];
+            }
+        }
+        let t = &qp.terminal;
+        let xn = self.sol.xn;
+        wr.xn = gaps(&self.rxn, &act.xn, &xn) * w;
+        wr.gn = gaps(&self.rgn, &act.gn, &(t.c * xn)) * w;
+        let tg = wr.gn - y.gn;
+        let prev = self.sol.pi.last().copied().unwrap_or_else(Vect::zeros);
+        self.gnt = t.q * xn + t.gx + wr.xn - y.xn + tr_mul(&t.c, &tg) - prev;
+        self.lq_solve(qp);
+        // The corrections, and the active rows' multipliers' dy = -w (r_a + a'dz): from the
+        // residual and the correction rather than from the rows at the new point, whose
+        // rounding `w` would amplify.
+        for k in 0..N {
+            let s = &qp.stages[k];
+            let (dx, du) = (self.dx[k], self.du[k]);
+            if k > 0 {
+                self.sol.x[k] += dx;
+            }
+            self.sol.u[k] += du;
+            y.x[k] -= wr.x[k] + on(&act.x[k], &dx) * w;
+            y.u[k] -= wr.u[k] + on(&act.u[k], &du) * w;
+            y.g[k] -= wr.g[k] + on(&act.g[k], &(s.c * dx + s.d * du)) * w;
+        }
+        let dxn = self.dxn;
+        self.sol.xn += dxn;
+        y.xn -= wr.xn + on(&act.xn, &dxn) * w;
+        y.gn -= wr.gn + on(&act.gn, &(t.c * dxn)) * w;
+        for (pi, dpi) in self.sol.pi.iter_mut().zip(&self.pi_new) {
+            *pi += *dpi;
+        }
+    }
+
+    /// [`update_sides`] over every row set: the largest disagreement and whether a row moved.
+    fn move_rows(
+        &self,
+        qp: &OcpQp<T, NX, NU, NG, NGN, N>,
+        act: &mut ActiveSet<T, NX, NU, NG, NGN, N>,
+        y: &mut Duals<T, NX, NU, NG, NGN, N>,
+        tol: T,
+        at_least: T,
+    ) -> (T, bool) {
+        let (mut worst, mut moved) = (T::ZERO, false);
+        let mut add = |(w, m): (T, bool)| {
+            worst = worst.max(w);
+            moved |= m;
+        };
+        for k in 0..N {
+            let s = &qp.stages[k];
+            let (x, u) = (self.sol.x[k], self.sol.u[k]);
+            add(update_sides(
+                &self.rx[k],
+                &mut act.x[k],
+                &mut y.x[k],
+                &x,
+                tol,
+                at_least,
+            ));
+            add(update_sides(
+                &self.ru[k],
+                &mut act.u[k],
+                &mut y.u[k],
+                &u,
+                tol,
+                at_least,
+            ));
+            let vg = s.c * x + s.d * u;
+            add(update_sides(
+                &self.rg[k],
+                &mut act.g[k],
+                &mut y.g[k],
+                &vg,
+                tol,
+                at_least,
+            ));
+        }
+        let xn = self.sol.xn;
+        add(update_sides(
+            &self.rxn,
+            &mut act.xn,
+            &mut y.xn,
+            &xn,
+            tol,
+            at_least,
+        ));
+        let vg = qp.terminal.c * xn;
+        add(update_sides(
+            &self.rgn,
+            &mut act.gn,
+            &mut y.gn,
+            &vg,
+            tol,
+            at_least,
+        ));
+        (worst, moved)
+    }
+
+    /// Stationarity (relative to its largest term when that exceeds 1, as in the interior
+    /// point's residuals) and dynamics residual of the active-set QP at the current point.
+    fn polish_residuals(
+        &self,
+        qp: &OcpQp<T, NX, NU, NG, NGN, N>,
+        y: &Duals<T, NX, NU, NG, NGN, N>,
+    ) -> (T, T) {
+        let (mut rs, mut re, mut scale) = (T::ZERO, T::ZERO, T::ONE);
+        for k in 0..N {
+            let s = &qp.stages[k];
+            let (x, u, pi) = (self.sol.x[k], self.sol.u[k], self.sol.pi[k]);
+            let xnext = if k + 1 < N {
+                self.sol.x[k + 1]
+            } else {
+                self.sol.xn
+            };
+            re = re.max(amax(&(s.a * x + s.b * u + s.f - xnext)));
+            let hu = s.r * u + s.s * x + s.gu;
+            let (bpi, dy) = (tr_mul(&s.b, &pi), tr_mul(&s.d, &y.g[k]));
+            rs = rs.max(amax(&(hu + bpi - y.u[k] - dy)));
+            scale = scale
+                .max(amax(&hu))
+                .max(amax(&bpi))
+                .max(amax(&y.u[k]))
+                .max(amax(&dy));
+            if k > 0 {
+                let hx = s.q * x + tr_mul(&s.s, &u) + s.gx;
+                let (api, cy) = (tr_mul(&s.a, &pi), tr_mul(&s.c, &y.g[k]));
+                let prev = self.sol.pi[k - 1];
+                rs = rs.max(amax(&(hx + api - prev - y.x[k] - cy)));
+                scale = scale
+                    .max(amax(&hx))
+                    .max(amax(&api))
+                    .max(amax(&prev))
+                    .max(amax(&y.x[k]))
+                    .max(amax(&cy));
+            }
+        }
+        let t = &qp.terminal;
+        let xn = self.sol.xn;
+        let hxn = t.q * xn + t.gx;
+        let cy = tr_mul(&t.c, &y.gn);
+        let prev = self.sol.pi.last().copied().unwrap_or_else(Vect::zeros);
+        rs = rs.max(amax(&(hxn - prev - y.xn - cy)));
+        scale = scale
+            .max(amax(&hxn))
+            .max(amax(&prev))
+            .max(amax(&y.xn))
+            .max(amax(&cy));
+        (rs / scale, re)
+    }
+}
