@@ -251,14 +251,17 @@ pub struct QpSettings<T> {
     pub refine: u32,
     /// How the Newton systems are solved: Riccati recursion or condensing (see [`QpMethod`]).
     pub method: QpMethod,
-    /// After a QP is solved, refine the solution by primal-dual active-set iterations
-    /// started from the interior point's (each solves the QP with the rows taken as active
-    /// held as equalities and the others dropped, one factorization each: at most 4 for a
-    /// condensed QP, 50 for the Riccati recursion), and keep the result if it satisfies
-    /// every bound and its multipliers have the right signs (else the interior point's; see
-    /// [`QpSolver::polished`]). Active rows end on their values; the residuals reported
-    /// stay the interior point's. QPs with soft rows are not polished, nor are QPs solved
-    /// by the Riccati recursion in a solver with condensing storage (`NC = N`). Default:
+    /// After a QP is solved, refine the solution by active-set iterations started from the
+    /// interior point's (each solves the QP with the rows taken as active held as equalities
+    /// and the others dropped, one factorization each: a primal-dual active-set method, at
+    /// most 4 iterations, for a condensed QP; a primal one, at most 50, for the Riccati
+    /// recursion), and keep the result if it satisfies every bound and its multipliers have
+    /// the right signs (else the interior point's; see [`QpSolver::polished`]). Active rows
+    /// end on their values; the residuals reported stay the interior point's. With the
+    /// Riccati recursion, a solve stopped by the iteration limit is polished too, and if
+    /// the polish is kept the status is `Solved` with the polish's residuals
+    /// (complementarity zero). QPs with soft rows are not polished, nor are QPs solved by
+    /// the Riccati recursion in a solver with condensing storage (`NC = N`). Default:
     /// [`Real::DEFAULT_POLISH`].
     pub polish: bool,
 }
@@ -749,12 +752,30 @@ impl<
                 self.polished = self.condensed_polish();
             }
             self.expand(qp);
-        } else if polish && NC == 0 {
-            // Not for solvers with condensing storage, whose QPs are condensed but when a
-            // state bound or general row appears: that keeps this polish (11 KB of code on
-            // a Cortex-M4F, which has 1 KB to spare under its 64 KiB target) out of their
-            // builds.
-            self.polished = self.riccati_polish(qp);
+            return info;
+        }
+        // Not for solvers with condensing storage, whose QPs are condensed but when a state
+        // bound or general row appears: that keeps this polish (11 KB of code on a
+        // Cortex-M4F, which has 1 KB to spare under its 64 KiB target) out of their builds.
+        // An interior point stopped by the iteration limit is polished too: a polish that
+        // is kept meets the tolerances with exact complementarity, so the QP is solved.
+        let limit = info.status == QpStatus::MaxIterations;
+        if NC == 0
+            && self.settings.polish
+            && (polish || limit)
+            && let Some([res_stat, res_eq, res_ineq]) = self.riccati_polish(qp)
+        {
+            self.polished = true;
+            if limit {
+                return QpInfo {
+                    status: QpStatus::Solved,
+                    res_stat,
+                    res_eq,
+                    res_ineq,
+                    mu: T::ZERO,
+                    ..info
+                };
+            }
         }
         info
     }

@@ -95,18 +95,18 @@ macro_rules! against_clarabel {
 
 /// The Riccati recursion in `f32` at its default settings (polish on) on random QPs with
 /// state bounds and general constraints, against clarabel on the same rounded data, over a
-/// fixed set of 100 draws (odd seeds: `seed | 1` is the generator's state): every draw
-/// within 1e-2 relative, at least 97 % within 1e-3 and polished (all of them are, today;
-/// the figures are printed). Without the polish (`solver.settings.polish = false` added
-/// below) 168 of the 342 judged draws are within 1e-3, the worst 1.6e-2 off: the interior
-/// point stops at f32's complementarity tolerance, `1e-4`. A draw whose active-set
-/// iteration does not settle in 50 rounds keeps the interior point's solution.
+/// fixed set of 400 draws per size (odd seeds: `seed | 1` is the generator's state): every
+/// judged draw solved and within 1e-3 relative, at least 99 % of them polished (the figures
+/// are printed). Without the polish (`solver.settings.polish = false` added below) 672 of
+/// the 1,347 judged draws are within 1e-3 and the others up to 1.3e-2 off: the interior
+/// point stops at f32's complementarity tolerance, `1e-4`; one (small_n5, seed 389) stops
+/// at the iteration limit instead, 5.9e-2 off, and the polish solves it.
 macro_rules! f32_against_clarabel {
     ($name:ident, $nx:literal, $nu:literal, $ng:literal, $ngn:literal, $n:literal) => {
         #[test]
         fn $name() {
-            let (mut judged, mut within, mut polished, mut worst) = (0, 0, 0, 0.0f64);
-            for seed in (0..100u64).map(|i| 2 * i + 1) {
+            let (mut judged, mut polished, mut worst) = (0, 0, 0.0f64);
+            for seed in (0..400u64).map(|i| 2 * i + 1) {
                 let qp32 = cast_qp::<f64, f32, $nx, $nu, $ng, $ngn, $n>(&random_qp(seed));
                 let qp64 = cast_qp::<f32, f64, $nx, $nu, $ng, $ngn, $n>(&qp32);
                 let Some(reference) = clarabel_solve(&qp64) else {
@@ -125,25 +125,20 @@ macro_rules! f32_against_clarabel {
                     (0..=$n).map(|k| sol.state(k).unwrap().cast()).collect();
                 let err = compare(&reference, &us, &xs);
                 assert!(
-                    err <= 1e-2,
+                    err <= 1e-3,
                     "seed {seed}: f32 differs from clarabel by {err:e}"
                 );
                 judged += 1;
-                within += usize::from(err <= 1e-3);
                 polished += usize::from(solver.polished());
                 worst = worst.max(err);
             }
             println!(
-                "{}: {judged} judged, {within} within 1e-3, {polished} polished, worst {worst:.2e}",
+                "{}: {judged} judged, {polished} polished, worst {worst:.2e}",
                 stringify!($name)
             );
-            assert!(judged >= 50, "only {judged} draws judged");
+            assert!(judged >= 200, "only {judged} draws judged");
             assert!(
-                100 * within >= 97 * judged,
-                "{within} of {judged} within 1e-3"
-            );
-            assert!(
-                100 * polished >= 97 * judged,
+                100 * polished >= 99 * judged,
                 "{polished} of {judged} polished"
             );
         }

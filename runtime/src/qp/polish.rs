@@ -17,23 +17,36 @@
 //! multipliers' block, `H dz + A'(pi) - a'dy = -r_s`, `a'dz + delta dy = -r_a`; the
 //! residuals `r_s` (stationarity), `r_a` (the active rows' distance to their bounds) and the
 //! dynamics residual are those of the unregularized system, so the iteration converges to
-//! its solution, with the multipliers `y` of the active rows. Rows whose multiplier turns to
-//! the wrong sign are then dropped and rows the solution violates added, and the QP solved
-//! again (one factorization each), until the sets repeat. The result replaces the interior
-//! point's only if it satisfies every bound, every active row's multiplier has its sign, and
-//! its stationarity and dynamics residuals meet the tolerances; else the interior point's
-//! solution is kept. QPs with soft rows are not polished.
+//! its solution, with the multipliers `y` of the active rows (10 steps per factorization,
+//! 20 more on the final set: the contraction is slow where active rows are nearly
+//! dependent).
+//!
+//! The active set is then corrected as in a primal active-set method started from the
+//! interior point, which is feasible to the tolerance: if the solution on the active set
+//! violates a free row, the step from the current point stops where the first such row
+//! becomes active, and that row is added; else the whole step is taken and the active row
+//! whose multiplier has the most wrong sign is freed. Each correction is one factorization,
+//! at most 50. (A primal-dual active-set method, which moves every disagreeing row at once,
+//! cycled on random QPs with general rows.) The result replaces the interior point's only
+//! if no row disagrees beyond the tolerance and its stationarity and dynamics residuals
+//! meet the tolerances; else the interior point's solution is kept. QPs with soft rows are
+//! not polished.
 
-use super::{OcpQp, QpSolver, Vect};
+use super::{OcpQp, QpSolution, QpSolver, Vect};
 use crate::kernels::tr_mul;
 use crate::real::Real;
 use crate::rows::{Rows, Soft};
 
-/// Active-set rounds at most (each one factorization).
+/// Active-set corrections at most (each one factorization).
 const ROUNDS: usize = 50;
 
-/// Refinement steps per round (each one Riccati solve with the round's factorization).
+/// Refinement steps per round (each one Riccati solve with the round's factorization); the
+/// contraction per step is about `delta / (delta + s)`, `s` the smallest eigenvalue of the
+/// active rows' Schur complement: slow on nearly dependent rows.
 const REFINE_STEPS: usize = 10;
+
+/// Refinement steps on the final active set.
+const FINAL_STEPS: usize = 20;
 
 /// Which side of a row the polish holds as an equality.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -59,6 +72,86 @@ pub(super) struct ActiveSet<
     pub xn: [Side; NX],
     pub gn: [Side; NGN],
     pub w: T,
+}
+
+/// A row: its row set (stage `k`'s state bounds, control bounds, general rows, or the
+/// terminal ones) and its index.
+#[derive(Clone, Copy, Debug)]
+enum Row {
+    X(usize, usize),
+    U(usize, usize),
+    G(usize, usize),
+    Xn(usize),
+    Gn(usize),
+}
+
+impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usize, const N: usize>
+    ActiveSet<T, NX, NU, NG, NGN, N>
+{
+    /// Puts `row` on `side`, its multiplier at zero.
+    fn set(&mut self, y: &mut Duals<T, NX, NU, NG, NGN, N>, row: Row, side: Side) {
+        let (sides, yv): (Option<&mut Side>, Option<&mut T>) = match row {
+            Row::X(k, i) => (
+                self.x.get_mut(k).and_then(|s| s.get_mut(i)),
+                y.x.get_mut(k).and_then(|v| v.get_mut(i)),
+            ),
+            Row::U(k, i) => (
+                self.u.get_mut(k).and_then(|s| s.get_mut(i)),
+                y.u.get_mut(k).and_then(|v| v.get_mut(i)),
+            ),
+            Row::G(k, i) => (
+                self.g.get_mut(k).and_then(|s| s.get_mut(i)),
+                y.g.get_mut(k).and_then(|v| v.get_mut(i)),
+            ),
+            Row::Xn(i) => (self.xn.get_mut(i), y.xn.get_mut(i)),
+            Row::Gn(i) => (self.gn.get_mut(i), y.gn.get_mut(i)),
+        };
+        if let (Some(s), Some(v)) = (sides, yv) {
+            *s = side;
+            *v = T::ZERO;
+        }
+    }
+}
+
+/// The step in `[0, 1]` from row values `v0` to `v1` at which the first free row that `v1`
+/// violates (beyond `tol` relative to `max(1, |v1|)`) reaches its bound, with the row's
+/// index and side; `(1, None)` if `v1` violates none.
+fn ratio<T: Real, const K: usize>(
+    r: &Rows<T, K>,
+    sides: &[Side; K],
+    v0: &Vect<T, K>,
+    v1: &Vect<T, K>,
+    tol: T,
+) -> (T, Option<(usize, Side)>) {
+    let mut best = (T::ONE, None);
+    for (i, side) in sides.iter().enumerate() {
+        if *side != Side::Free {
+            continue;
+        }
+        let (a, b) = (v0[i], v1[i]);
+        let slack = tol * T::ONE.max(b.abs());
+        // Distance to the bound at v0 (0 if already past it) over the distance travelled.
+        let step = |room: T, travel: T| {
+            if travel > T::ZERO {
+                (room.max(T::ZERO) / travel).min(T::ONE)
+            } else {
+                T::ZERO
+            }
+        };
+        let hit = if r.has_lo[i] && b < r.lo[i] - slack {
+            Some((step(a - r.lo[i], a - b), Side::Lower))
+        } else if r.has_hi[i] && b > r.hi[i] + slack {
+            Some((step(r.hi[i] - a, b - a), Side::Upper))
+        } else {
+            None
+        };
+        if let Some((alpha, side)) = hit
+            && (best.1.is_none() || alpha < best.0)
+        {
+            best = (alpha, Some((i, side)));
+        }
+    }
+    best
 }
 
 /// Multipliers of the active rows (`lam_l - lam_u`, zero on free rows), or other values per
@@ -211,6 +304,20 @@ fn update_sides<T: Real, const K: usize>(
     (worst, moved)
 }
 
+/// How far the values `v` are outside the rows' bounds, at most.
+fn violation<T: Real, const K: usize>(r: &Rows<T, K>, v: &Vect<T, K>) -> T {
+    let mut m = T::ZERO;
+    for i in 0..K {
+        if r.has_lo[i] {
+            m = m.max(r.lo[i] - v[i]);
+        }
+        if r.has_hi[i] {
+            m = m.max(v[i] - r.hi[i]);
+        }
+    }
+    m
+}
+
 /// Largest absolute entry.
 fn amax<T: Real, const K: usize>(v: &Vect<T, K>) -> T {
     v.iter().fold(T::ZERO, |m, x| m.max(x.abs()))
@@ -226,13 +333,14 @@ impl<
     const NC: usize,
 > QpSolver<T, NX, NU, NG, NGN, N, NC>
 {
-    /// The polish of the module docs after a solve by the Riccati recursion; returns whether
-    /// its result replaced the solution in `sol`.
+    /// The polish of the module docs after a solve by the Riccati recursion; if its result
+    /// replaced the solution in `sol`, returns its stationarity (relative) and dynamics
+    /// residuals and its largest bound violation.
     // Not inlined: its arrays stay out of the stack frame of a solve that does not polish.
     #[inline(never)]
-    pub(super) fn riccati_polish(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N>) -> bool {
+    pub(super) fn riccati_polish(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N>) -> Option<[T; 3]> {
         if N == 0 || self.sg.iter().any(|s| s.any) || self.sgn.any {
-            return false;
+            return None;
         }
         let w = T::ONE / T::EPSILON.sqrt();
         let mut act = ActiveSet {
@@ -261,25 +369,45 @@ impl<
         let interior = self.sol;
         let tol = self.settings.tol_ineq.max(self.settings.tol_stat);
         let mut settled = false;
-        for round in 0..ROUNDS {
+        // A primal active-set method from the interior point (feasible to the tolerance):
+        // each round solves the QP on the active set; if the step there would violate a
+        // free row, it stops where the first one becomes active and adds it; else it takes
+        // the whole step and frees the active row whose multiplier is the most wrong, if
+        // any (moving many rows at once, as a primal-dual active-set method does, cycled on
+        // random QPs with general rows).
+        let mut cur = self.sol;
+        for _ in 0..ROUNDS {
             if !self.factorize(qp, Some(&act)) {
                 break;
             }
             for _ in 0..REFINE_STEPS {
                 self.polish_step(qp, &act, &mut y);
             }
-            // Settled when no row disagrees by more than the tolerance. The first round moves
-            // every row that disagrees; later ones only the row that disagrees most, since
-            // moving many at once cycles on some QPs (random QPs with general rows).
+            let (alpha, hit) = self.blocking(qp, &cur, &act, tol);
+            if let Some((row, side)) = hit {
+                self.blend(&cur, alpha);
+                act.set(&mut y, row, side);
+                cur = self.sol;
+                continue;
+            }
+            cur = self.sol;
             let worst = self.move_rows(qp, &mut act, &mut y, tol, T::INF).0;
             if worst <= tol {
                 settled = true;
                 break;
             }
-            let at_least = if round == 0 { tol } else { worst };
-            self.move_rows(qp, &mut act, &mut y, tol, at_least);
+            self.move_rows(qp, &mut act, &mut y, tol, worst);
+        }
+        if settled {
+            // The refinement contracts slowly where active rows are nearly dependent: more
+            // steps on the final active set (no factorization), which must still agree.
+            for _ in 0..FINAL_STEPS {
+                self.polish_step(qp, &act, &mut y);
+            }
+            settled = self.move_rows(qp, &mut act, &mut y, tol, T::INF).0 <= tol;
         }
         let (stat, eq) = self.polish_residuals(qp, &y);
+        let ineq = self.bound_violation(qp);
         let ok = settled
             && stat <= self.settings.tol_stat
             && eq <= self.settings.tol_eq
@@ -288,8 +416,82 @@ impl<
             && self.sol.xn.iter().all(|v| v.finite());
         if !ok {
             self.sol = interior;
+            return None;
         }
-        ok
+        Some([stat, eq, ineq])
+    }
+
+    /// The largest violation of a bound or general-constraint side at the current point.
+    fn bound_violation(&self, qp: &OcpQp<T, NX, NU, NG, NGN, N>) -> T {
+        let mut m = T::ZERO;
+        for k in 0..N {
+            let s = &qp.stages[k];
+            let (x, u) = (self.sol.x[k], self.sol.u[k]);
+            m = m
+                .max(violation(&self.rx[k], &x))
+                .max(violation(&self.ru[k], &u))
+                .max(violation(&self.rg[k], &(s.c * x + s.d * u)));
+        }
+        let xn = self.sol.xn;
+        m.max(violation(&self.rxn, &xn))
+            .max(violation(&self.rgn, &(qp.terminal.c * xn)))
+    }
+
+    /// The ratio test of the primal active-set method: over every free row, the step from
+    /// `cur` to the solution in `sol` at which the first row the solution violates becomes
+    /// active, and that row.
+    fn blocking(
+        &self,
+        qp: &OcpQp<T, NX, NU, NG, NGN, N>,
+        cur: &QpSolution<T, NX, NU, N>,
+        act: &ActiveSet<T, NX, NU, NG, NGN, N>,
+        tol: T,
+    ) -> (T, Option<(Row, Side)>) {
+        let mut best: (T, Option<(Row, Side)>) = (T::ONE, None);
+        let mut take = |(alpha, hit): (T, Option<(usize, Side)>), row: &dyn Fn(usize) -> Row| {
+            if let Some((i, side)) = hit
+                && (best.1.is_none() || alpha < best.0)
+            {
+                best = (alpha, Some((row(i), side)));
+            }
+        };
+        for k in 0..N {
+            let s = &qp.stages[k];
+            let (x0, u0, x1, u1) = (cur.x[k], cur.u[k], self.sol.x[k], self.sol.u[k]);
+            take(ratio(&self.rx[k], &act.x[k], &x0, &x1, tol), &|i| {
+                Row::X(k, i)
+            });
+            take(ratio(&self.ru[k], &act.u[k], &u0, &u1, tol), &|i| {
+                Row::U(k, i)
+            });
+            let (g0, g1) = (s.c * x0 + s.d * u0, s.c * x1 + s.d * u1);
+            take(ratio(&self.rg[k], &act.g[k], &g0, &g1, tol), &|i| {
+                Row::G(k, i)
+            });
+        }
+        let c = &qp.terminal.c;
+        let (x0, x1) = (cur.xn, self.sol.xn);
+        take(ratio(&self.rxn, &act.xn, &x0, &x1, tol), &Row::Xn);
+        take(
+            ratio(&self.rgn, &act.gn, &(c * x0), &(c * x1), tol),
+            &Row::Gn,
+        );
+        best
+    }
+
+    /// `sol <- cur + alpha (sol - cur)` (states, controls, dynamics multipliers).
+    fn blend(&mut self, cur: &QpSolution<T, NX, NU, N>, alpha: T) {
+        let mix = |a: T, b: T| a + (b - a) * alpha;
+        for (s, c) in self.sol.x.iter_mut().zip(&cur.x) {
+            *s = c.zip_map(s, mix);
+        }
+        for (s, c) in self.sol.u.iter_mut().zip(&cur.u) {
+            *s = c.zip_map(s, mix);
+        }
+        for (s, c) in self.sol.pi.iter_mut().zip(&cur.pi) {
+            *s = c.zip_map(s, mix);
+        }
+        self.sol.xn = cur.xn.zip_map(&self.sol.xn, mix);
     }
 
     /// One refinement step: the residuals of the active-set QP's KKT system at the current
