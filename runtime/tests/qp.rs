@@ -56,6 +56,30 @@ fn solved_error<const NX: usize, const NU: usize, const N: usize>(
     Ok(compare(reference, &sol.u, &xs))
 }
 
+/// Solves `qp` again with a copy of `solver` with the polish on (off by default in f64),
+/// requires it solved and the polish kept, and returns the polished solution's largest
+/// difference from the reference (relative, as [`compare`]).
+fn polished_error<
+    const NX: usize,
+    const NU: usize,
+    const NG: usize,
+    const NGN: usize,
+    const N: usize,
+    const NC: usize,
+>(
+    solver: &QpSolver<f64, NX, NU, NG, NGN, N, NC>,
+    qp: &OcpQp<f64, NX, NU, NG, NGN, N>,
+    reference: &Reference<NX, NU>,
+) -> Result<f64, TestCaseError> {
+    let mut polished = Box::new(solver.clone());
+    polished.settings.polish = true;
+    prop_assert_eq!(polished.solve(qp).status, QpStatus::Solved);
+    prop_assert!(polished.polished(), "the polished solution was refused");
+    let ps = polished.solution();
+    let pxs: Vec<_> = (0..=N).map(|k| *ps.state(k).unwrap()).collect();
+    Ok(compare(reference, &ps.u, &pxs))
+}
+
 macro_rules! against_clarabel {
     ($name:ident, $nx:literal, $nu:literal, $ng:literal, $ngn:literal, $n:literal) => {
         proptest! {
@@ -80,13 +104,7 @@ macro_rules! against_clarabel {
                 let err = solved_error(&info, &solver.settings, solver.solution(), &reference)?;
                 prop_assert!(err <= 1e-7, "f64 differs from clarabel by {err:e} (relative)");
                 // Polished (off by default in f64): the same solution, on the active rows.
-                let mut polished = solver.clone();
-                polished.settings.polish = true;
-                prop_assert_eq!(polished.solve(&qp).status, QpStatus::Solved);
-                prop_assert!(polished.polished(), "the polished solution was refused");
-                let ps = polished.solution();
-                let pxs: Vec<_> = (0..=$n).map(|k| *ps.state(k).unwrap()).collect();
-                let err = compare(&reference, &ps.u, &pxs);
+                let err = polished_error(&solver, &qp, &reference)?;
                 prop_assert!(err <= 1e-7, "polished differs from clarabel by {err:e} (relative)");
             }
         }
@@ -174,13 +192,7 @@ macro_rules! condensed_against_clarabel {
                 let err = solved_error(&info, &solver.settings, solver.solution(), &reference)?;
                 prop_assert!(err <= 1e-7, "condensed differs from clarabel by {err:e} (relative)");
                 // Polished (off by default in f64): the same solution, on the active bounds.
-                let mut polished = solver.clone();
-                polished.settings.polish = true;
-                prop_assert_eq!(polished.solve(&qp).status, QpStatus::Solved);
-                prop_assert!(polished.polished(), "the polished solution was refused");
-                let ps = polished.solution();
-                let pxs: Vec<_> = (0..=$n).map(|k| *ps.state(k).unwrap()).collect();
-                let err = compare(&reference, &ps.u, &pxs);
+                let err = polished_error(&solver, &qp, &reference)?;
                 prop_assert!(err <= 1e-7, "polished differs from clarabel by {err:e} (relative)");
                 let mut riccati = Box::new(QpSolver::<f64, $nx, $nu, 0, 0, $n>::NEW);
                 riccati.settings = solver.settings;
