@@ -380,9 +380,7 @@ impl<
             if !self.factorize(qp, Some(&act)) {
                 break;
             }
-            for _ in 0..REFINE_STEPS {
-                self.polish_step(qp, &act, &mut y);
-            }
+            self.refine_on(qp, &act, &mut y, REFINE_STEPS);
             let (alpha, hit) = self.blocking(qp, &cur, &act, tol);
             if let Some((row, side)) = hit {
                 self.blend(&cur, alpha);
@@ -401,9 +399,7 @@ impl<
         if settled {
             // The refinement contracts slowly where active rows are nearly dependent: more
             // steps on the final active set (no factorization), which must still agree.
-            for _ in 0..FINAL_STEPS {
-                self.polish_step(qp, &act, &mut y);
-            }
+            self.refine_on(qp, &act, &mut y, FINAL_STEPS);
             settled = self.move_rows(qp, &mut act, &mut y, tol, T::INF).0 <= tol;
         }
         let (stat, eq) = self.polish_residuals(qp, &y);
@@ -492,6 +488,56 @@ impl<
             *s = c.zip_map(s, mix);
         }
         self.sol.xn = cur.xn.zip_map(&self.sol.xn, mix);
+    }
+
+    /// Up to `steps` refinement steps, stopping once the KKT residuals of the active-set QP
+    /// (stationarity, dynamics, the active rows' distance to their bounds) are below a
+    /// hundredth of the tolerances (checked after every other step: a check costs about
+    /// half a step).
+    fn refine_on(
+        &mut self,
+        qp: &OcpQp<T, NX, NU, NG, NGN, N>,
+        act: &ActiveSet<T, NX, NU, NG, NGN, N>,
+        y: &mut Duals<T, NX, NU, NG, NGN, N>,
+        steps: usize,
+    ) {
+        let f = T::lit(0.01);
+        let st = self.settings;
+        for i in 0..steps {
+            self.polish_step(qp, act, y);
+            if i % 2 == 1 {
+                let (stat, eq) = self.polish_residuals(qp, y);
+                if stat <= st.tol_stat * f
+                    && eq <= st.tol_eq * f
+                    && self.active_gap(qp, act) <= st.tol_ineq * f
+                {
+                    break;
+                }
+            }
+        }
+    }
+
+    /// The largest distance of an active row from its bound.
+    fn active_gap(
+        &self,
+        qp: &OcpQp<T, NX, NU, NG, NGN, N>,
+        act: &ActiveSet<T, NX, NU, NG, NGN, N>,
+    ) -> T {
+        let mut m = T::ZERO;
+        for k in 0..N {
+            let s = &qp.stages[k];
+            let (x, u) = (self.sol.x[k], self.sol.u[k]);
+            m = m
+                .max(amax(&gaps(&self.rx[k], &act.x[k], &x)))
+                .max(amax(&gaps(&self.ru[k], &act.u[k], &u)))
+                .max(amax(&gaps(&self.rg[k], &act.g[k], &(s.c * x + s.d * u))));
+        }
+        let xn = self.sol.xn;
+        m.max(amax(&gaps(&self.rxn, &act.xn, &xn))).max(amax(&gaps(
+            &self.rgn,
+            &act.gn,
+            &(qp.terminal.c * xn),
+        )))
     }
 
     /// One refinement step: the residuals of the active-set QP's KKT system at the current
