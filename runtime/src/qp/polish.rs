@@ -17,9 +17,9 @@
 //! multipliers' block, `H dz + A'(pi) - a'dy = -r_s`, `a'dz + delta dy = -r_a`; the
 //! residuals `r_s` (stationarity), `r_a` (the active rows' distance to their bounds) and the
 //! dynamics residual are those of the unregularized system, so the iteration converges to
-//! its solution, with the multipliers `y` of the active rows (10 steps per factorization,
-//! 20 more on the final set: the contraction is slow where active rows are nearly
-//! dependent).
+//! its solution, with the multipliers `y` of the active rows (up to 10 steps per
+//! factorization and 20 more on the final set, until the residuals are a hundredth of the
+//! tolerances: the contraction is slow where active rows are nearly dependent).
 //!
 //! The active set is then corrected as in a primal active-set method started from the
 //! interior point, which is feasible to the tolerance: if the solution on the active set
