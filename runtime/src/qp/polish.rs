@@ -232,17 +232,6 @@ fn initial_sides<T: Real, const K: usize>(r: &Rows<T, K>) -> [Side; K] {
     sides
 }
 
-/// The interior point's multipliers on the active rows, zero on the others.
-fn initial_duals<T: Real, const K: usize>(r: &Rows<T, K>, sides: &[Side; K]) -> Vect<T, K> {
-    let mut y = r.dual();
-    for (yi, side) in y.iter_mut().zip(sides) {
-        if *side == Side::Free {
-            *yi = T::ZERO;
-        }
-    }
-    y
-}
-
 /// Distance of the active rows' values `v` from their bounds (zero on free rows).
 fn gaps<T: Real, const K: usize>(r: &Rows<T, K>, sides: &[Side; K], v: &Vect<T, K>) -> Vect<T, K> {
     let mut d = Vect::<T, K>::zeros();
@@ -318,11 +307,6 @@ fn violation<T: Real, const K: usize>(r: &Rows<T, K>, v: &Vect<T, K>) -> T {
     m
 }
 
-/// Largest absolute entry.
-fn amax<T: Real, const K: usize>(v: &Vect<T, K>) -> T {
-    v.iter().fold(T::ZERO, |m, x| m.max(x.abs()))
-}
-
 impl<
     T: Real,
     const NX: usize,
@@ -351,20 +335,16 @@ impl<
             gn: initial_sides(&self.rgn),
             w,
         };
-        let mut y = Duals {
-            x: [Vect::<T, NX>::zeros(); N],
-            u: [Vect::<T, NU>::zeros(); N],
-            g: [Vect::<T, NG>::zeros(); N],
-            xn: initial_duals(&self.rxn, &act.xn),
-            gn: initial_duals(&self.rgn, &act.gn),
-        };
+        let mut y = Duals::ZERO;
+        y.xn = on(&act.xn, &self.rxn.dual());
+        y.gn = on(&act.gn, &self.rgn.dual());
         for k in 0..N {
             act.x[k] = initial_sides(&self.rx[k]);
             act.u[k] = initial_sides(&self.ru[k]);
             act.g[k] = initial_sides(&self.rg[k]);
-            y.x[k] = initial_duals(&self.rx[k], &act.x[k]);
-            y.u[k] = initial_duals(&self.ru[k], &act.u[k]);
-            y.g[k] = initial_duals(&self.rg[k], &act.g[k]);
+            y.x[k] = on(&act.x[k], &self.rx[k].dual());
+            y.u[k] = on(&act.u[k], &self.ru[k].dual());
+            y.g[k] = on(&act.g[k], &self.rg[k].dual());
         }
         let interior = self.sol;
         let tol = self.settings.tol_ineq.max(self.settings.tol_stat);
@@ -528,16 +508,13 @@ impl<
             let s = &qp.stages[k];
             let (x, u) = (self.sol.x[k], self.sol.u[k]);
             m = m
-                .max(amax(&gaps(&self.rx[k], &act.x[k], &x)))
-                .max(amax(&gaps(&self.ru[k], &act.u[k], &u)))
-                .max(amax(&gaps(&self.rg[k], &act.g[k], &(s.c * x + s.d * u))));
+                .max(gaps(&self.rx[k], &act.x[k], &x).amax())
+                .max(gaps(&self.ru[k], &act.u[k], &u).amax())
+                .max(gaps(&self.rg[k], &act.g[k], &(s.c * x + s.d * u)).amax());
         }
         let xn = self.sol.xn;
-        m.max(amax(&gaps(&self.rxn, &act.xn, &xn))).max(amax(&gaps(
-            &self.rgn,
-            &act.gn,
-            &(qp.terminal.c * xn),
-        )))
+        m.max(gaps(&self.rxn, &act.xn, &xn).amax())
+            .max(gaps(&self.rgn, &act.gn, &(qp.terminal.c * xn)).amax())
     }
 
     /// One refinement step: the residuals of the active-set QP's KKT system at the current
@@ -687,26 +664,26 @@ impl<
             } else {
                 self.sol.xn
             };
-            re = re.max(amax(&(s.a * x + s.b * u + s.f - xnext)));
+            re = re.max((s.a * x + s.b * u + s.f - xnext).amax());
             let hu = s.r * u + s.s * x + s.gu;
             let (bpi, dy) = (tr_mul(&s.b, &pi), tr_mul(&s.d, &y.g[k]));
-            rs = rs.max(amax(&(hu + bpi - y.u[k] - dy)));
+            rs = rs.max((hu + bpi - y.u[k] - dy).amax());
             scale = scale
-                .max(amax(&hu))
-                .max(amax(&bpi))
-                .max(amax(&y.u[k]))
-                .max(amax(&dy));
+                .max(hu.amax())
+                .max(bpi.amax())
+                .max(y.u[k].amax())
+                .max(dy.amax());
             if k > 0 {
                 let hx = s.q * x + tr_mul(&s.s, &u) + s.gx;
                 let (api, cy) = (tr_mul(&s.a, &pi), tr_mul(&s.c, &y.g[k]));
                 let prev = self.sol.pi[k - 1];
-                rs = rs.max(amax(&(hx + api - prev - y.x[k] - cy)));
+                rs = rs.max((hx + api - prev - y.x[k] - cy).amax());
                 scale = scale
-                    .max(amax(&hx))
-                    .max(amax(&api))
-                    .max(amax(&prev))
-                    .max(amax(&y.x[k]))
-                    .max(amax(&cy));
+                    .max(hx.amax())
+                    .max(api.amax())
+                    .max(prev.amax())
+                    .max(y.x[k].amax())
+                    .max(cy.amax());
             }
         }
         let t = &qp.terminal;
@@ -714,12 +691,12 @@ impl<
         let hxn = t.q * xn + t.gx;
         let cy = tr_mul(&t.c, &y.gn);
         let prev = self.sol.pi.last().copied().unwrap_or_else(Vect::zeros);
-        rs = rs.max(amax(&(hxn - prev - y.xn - cy)));
+        rs = rs.max((hxn - prev - y.xn - cy).amax());
         scale = scale
-            .max(amax(&hxn))
-            .max(amax(&prev))
-            .max(amax(&y.xn))
-            .max(amax(&cy));
+            .max(hxn.amax())
+            .max(prev.amax())
+            .max(y.xn.amax())
+            .max(cy.amax());
         (rs / scale, re)
     }
 }
