@@ -252,6 +252,51 @@ pub(crate) fn add_mul_sum<T: Real, const R: usize, const K: usize>(
     }
 }
 
+/// Inverse of a lower-triangular matrix with a nonzero diagonal (a Cholesky factor), by
+/// forward substitution column by column.
+pub(crate) fn lower_inverse<T: Real, const K: usize>(l: &SMatrix<T, K, K>) -> SMatrix<T, K, K> {
+    let mut inv = SMatrix::<T, K, K>::zeros();
+    for j in 0..K {
+        inv[(j, j)] = T::ONE / l[(j, j)];
+        for i in j + 1..K {
+            let mut acc = T::ZERO;
+            for k in j..i {
+                acc += l[(i, k)] * inv[(k, j)];
+            }
+            inv[(i, j)] = -acc / l[(i, i)];
+        }
+    }
+    inv
+}
+
+/// `m' diag(w)`: row `i` of `m` scaled by `w_i`, transposed, in one pass.
+#[inline(always)]
+pub(crate) fn diag_mul_transposed<T: Real, const K: usize, const C: usize>(
+    w: &SMatrix<T, K, 1>,
+    m: &SMatrix<T, K, C>,
+) -> SMatrix<T, C, K> {
+    let md = &m.data.0;
+    let mut out = [[T::ZERO; C]; K];
+    for (i, o) in out.iter_mut().enumerate() {
+        let d = w[i];
+        for (j, oj) in o.iter_mut().enumerate() {
+            *oj = md[j][i] * d;
+        }
+    }
+    SMatrix::from_array_storage(nalgebra::ArrayStorage(out))
+}
+
+/// `m += diag(w)`.
+#[inline(always)]
+pub(crate) fn add_diagonal<T: Real, const K: usize>(
+    m: &mut SMatrix<T, K, K>,
+    w: &SMatrix<T, K, 1>,
+) {
+    for i in 0..K {
+        m[(i, i)] += w[i];
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -278,6 +323,13 @@ mod tests {
         let w =
             SMatrix::<f64, 4, 4>::from_diagonal(&SMatrix::<f64, 4, 1>::new(1.0, -2.0, 0.5, 3.0));
         assert!((scaled_transpose(&w, &b) - (w * b).transpose()).amax() < 1e-12);
+        assert_eq!(
+            diag_mul_transposed(&w.diagonal(), &b),
+            scaled_transpose(&w, &b)
+        );
+        let mut sq4 = SMatrix::<f64, 4, 4>::repeat(0.5);
+        add_diagonal(&mut sq4, &w.diagonal());
+        assert_eq!(sq4, SMatrix::repeat(0.5) + w);
         let mut sq = SMatrix::<f64, 3, 3>::from_fn(|i, j| (i * 3 + j) as f64 * 0.3 - 1.0);
         let want = (sq + sq.transpose()) * 0.5;
         symmetrize(&mut sq);
@@ -299,5 +351,20 @@ mod tests {
         let expect = SMatrix::<f64, 3, 1>::new(1.0, 2.0, 3.0) - a * v1 - a2 * v2;
         assert!((acc - expect).amax() < 1e-12);
         assert_eq!(mul(&SMatrix::<f64, 0, 4>::zeros(), &b).shape(), (0, 2));
+    }
+
+    #[test]
+    fn lower_inverse_inverts() {
+        let l = SMatrix::<f64, 4, 4>::from_fn(|i, j| {
+            if i == j {
+                1.5 + i as f64
+            } else if i > j {
+                0.3 * (i + 2 * j) as f64 - 0.4
+            } else {
+                0.0
+            }
+        });
+        let err = (lower_inverse(&l) * l - SMatrix::<f64, 4, 4>::identity()).amax();
+        assert!(err < 1e-14, "{err}");
     }
 }

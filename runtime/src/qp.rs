@@ -35,7 +35,10 @@
 
 use nalgebra::{SMatrix, SVector};
 
-use crate::kernels::{mul_sparse, mul_sparse_add_into, symmetrize, tr_mul, tr_mul_add_into};
+use crate::kernels::{
+    add_diagonal, diag_mul_transposed, lower_inverse, mul, mul_sparse, mul_sparse_add_into, mul_tr,
+    sub_mul_tr_sum, symmetrize, tr_mul,
+};
 use crate::real::Real;
 use crate::rows::{BoundError, Rhs, Rows, Soft};
 
@@ -437,16 +440,18 @@ pub struct QpSolver<
     sgn: Soft<T, NGN>,
     /// Dynamics residuals `A x + B u + f - x_next`.
     rb: [Vect<T, NX>; N],
+    /// The soft rows' stationarity residual and the largest of its terms.
+    soft_stat: [T; 2],
     /// `H y + g` per stage (without the inequality terms).
     hx: [Vect<T, NX>; N],
     hu: [Vect<T, NU>; N],
     hxn: Vect<T, NX>,
-    /// Riccati: `P_{k+1}`, `p_{k+1}`, Cholesky factor of `R + B'PB`, `S + B'PA`, gain `K`.
+    /// Riccati: `P_{k+1}`, `p_{k+1}`, `L^-1` for the Cholesky factor `L` of `R~ = R + B'PB`,
+    /// `W' = S~'L^-T` for `S~ = S + B'PA`, and the feedforward term `y` (see [`lq_solve`]).
     pn: [Mat<T, NX, NX>; N],
     pvn: [Vect<T, NX>; N],
-    l: [Mat<T, NU, NU>; N],
-    sbar: [Mat<T, NU, NX>; N],
-    kmat: [Mat<T, NU, NX>; N],
+    linv: [Mat<T, NU, NU>; N],
+    wt: [Mat<T, NX, NU>; N],
     kv: [Vect<T, NU>; N],
     /// Right-hand side of the linear-quadratic subproblem: reduced gradients and dynamics
     /// residuals.
@@ -574,14 +579,14 @@ impl<
         sg: [Soft::NEW; N],
         sgn: Soft::NEW,
         rb: [crate::zeros(); N],
+        soft_stat: [T::ZERO; 2],
         hx: [crate::zeros(); N],
         hu: [crate::zeros(); N],
         hxn: crate::zeros(),
         pn: [crate::zeros(); N],
         pvn: [crate::zeros(); N],
-        l: [crate::zeros(); N],
-        sbar: [crate::zeros(); N],
-        kmat: [crate::zeros(); N],
+        linv: [crate::zeros(); N],
+        wt: [crate::zeros(); N],
         kv: [crate::zeros(); N],
         gxt: [crate::zeros(); N],
         gut: [crate::zeros(); N],
@@ -865,18 +870,32 @@ impl<
         // has not decreased: a feasible problem's primal residual shrinks by (1 - alpha) every
         // iteration; one stuck for many iterations means the constraints cannot be met.
         let (mut prev_primal, mut stalled) = (T::INF, 0u32);
+        // The Riccati recursion's stationarity residual costs about as much as the others; it
+        // is computed in the first iteration, when the others would let the iteration stop,
+        // and when it ends. In between, its estimate: a step of length alpha shrinks it by
+        // (1 - alpha), as it is linear in the variables and the Newton step zeroes it.
+        let mut stat = T::INF;
         for iter in 0..st.max_iter {
             res = self.residuals(qp);
             let mu = res[3] / m_real;
             res[3] = mu;
+            if !self.condensed {
+                let others = res[1] <= st.tol_eq && res[2] <= st.tol_ineq && mu <= st.tol_comp;
+                res[0] = if iter == 0 || others {
+                    self.stationarity(qp)
+                } else {
+                    stat
+                };
+            }
+            stat = res[0];
             if !res.iter().all(|r| r.finite()) {
-                return self.info(QpStatus::Infeasible, iter, res);
+                return self.info(QpStatus::Infeasible, iter, self.exact(qp, res));
             }
             let primal = res[1].max(res[2]);
             if primal > st.tol_eq.max(st.tol_ineq) && primal >= T::lit(0.99) * prev_primal {
                 stalled += 1;
                 if stalled >= STALL_LIMIT {
-                    return self.info(QpStatus::Infeasible, iter, res);
+                    return self.info(QpStatus::Infeasible, iter, self.exact(qp, res));
                 }
             } else {
                 stalled = 0;
@@ -891,10 +910,10 @@ impl<
                 return self.info(QpStatus::Solved, iter, res);
             }
             if self.max_multiplier() > diverge {
-                return self.info(QpStatus::Infeasible, iter, res);
+                return self.info(QpStatus::Infeasible, iter, self.exact(qp, res));
             }
             if !self.factorize(qp, None) {
-                return self.info(QpStatus::NumericalError, iter, res);
+                return self.info(QpStatus::NumericalError, iter, self.exact(qp, res));
             }
             // Predictor.
             self.newton_direction(qp, Rhs::Affine);
@@ -931,8 +950,10 @@ impl<
             let alpha = (tau * self.max_step(T::lit(1e30))).min(T::ONE);
             self.last_alpha = alpha;
             self.take_step(alpha);
+            stat *= T::ONE - alpha;
         }
         res = self.residuals(qp);
+        res = self.exact(qp, res);
         res[3] /= m_real;
         let status = if res[0] <= st.tol_stat
             && res[1] <= st.tol_eq
@@ -945,6 +966,15 @@ impl<
         };
         self.dual_valid = status == QpStatus::Solved;
         self.info(status, st.max_iter, res)
+    }
+
+    /// `res` from [`residuals`](Self::residuals) with the stationarity residual computed
+    /// (the condensed QP's is part of them).
+    fn exact(&self, qp: &OcpQp<T, NX, NU, NG, NGN, N>, mut res: [T; 4]) -> [T; 4] {
+        if !self.condensed {
+            res[0] = self.stationarity(qp);
+        }
+        res
     }
 
     fn max_multiplier(&self) -> T {
@@ -969,20 +999,16 @@ impl<
         m
     }
 
-    /// Computes all residuals and `H y + g`; returns
-    /// `[stationarity, dynamics, inequality, sum t lam]`. The stationarity residual is relative
-    /// to the largest of its terms (`H y + g`, `A'pi`, `B'pi`, `pi`, the bound multipliers,
-    /// and for soft rows the slack penalty terms and multipliers) when that exceeds 1:
-    /// rounding makes it no smaller than about `eps` times that. The others are absolute;
-    /// soft rows' slacks enter the inequality residual, their stationarity `l1 + l2 s - lam -
-    /// m` the stationarity residual and `s m` the complementarity.
+    /// Computes the residuals but stationarity, and `H y + g`; returns
+    /// `[0, dynamics, inequality, sum t lam]` (for a condensed QP, stationarity in place of the
+    /// 0; otherwise see [`stationarity`](Self::stationarity), which needs this call first). Soft rows' slacks enter the inequality residual and
+    /// `s m` the complementarity. The dynamics and inequality residuals are absolute.
     fn residuals(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N>) -> [T; 4] {
         if self.condensed {
             return self.condensed_residuals();
         }
-        let (mut rs, mut re, mut ri, mut comp) = (T::ZERO, T::ZERO, T::ZERO, T::ZERO);
-        let mut gscale = T::ONE;
-        let max_abs = |v: &[T]| v.iter().fold(T::ZERO, |m, x| m.max(x.abs()));
+        let (mut re, mut ri, mut comp) = (T::ZERO, T::ZERO, T::ZERO);
+        let mut soft = [T::ZERO; 2];
         for k in 0..N {
             let s = &qp.stages[k];
             let (x, u) = (self.sol.x[k], self.sol.u[k]);
@@ -991,40 +1017,65 @@ impl<
             } else {
                 self.sol.xn
             };
-            self.rb[k] = s.a * x + s.b * u + s.f - xnext;
-            re = re.max(max_abs(self.rb[k].as_slice()));
-            self.hx[k] = s.q * x + tr_mul(&s.s, &u) + s.gx;
-            self.hu[k] = s.r * u + s.s * x + s.gu;
-            gscale = gscale.max(self.hu[k].amax());
-            if k > 0 {
-                gscale = gscale.max(self.hx[k].amax());
-            }
+            self.rb[k] = mul_sparse(&s.a, &x) + mul_sparse(&s.b, &u) + s.f - xnext;
+            re = re.max(self.rb[k].amax());
+            self.hx[k] = mul(&s.q, &x) + tr_mul(&s.s, &u) + s.gx;
+            self.hu[k] = mul(&s.r, &u) + mul(&s.s, &x) + s.gu;
             ri = ri
                 .max(self.rx[k].residuals(&x, None))
-                .max(self.ru[k].residuals(&u, None))
-                .max(self.rg[k].residuals(&(s.c * x + s.d * u), Some(&self.sg[k])));
-            comp += self.rx[k].complementarity()
-                + self.ru[k].complementarity()
-                + self.rg[k].complementarity()
-                + self.sg[k].complementarity();
-            let (srs, sscale) = self.sg[k].residuals(&self.rg[k]);
-            rs = rs.max(srs);
-            gscale = gscale.max(sscale);
+                .max(self.ru[k].residuals(&u, None));
+            comp += self.rx[k].complementarity() + self.ru[k].complementarity();
+            if NG > 0 {
+                let g = mul(&s.c, &x) + mul(&s.d, &u);
+                ri = ri.max(self.rg[k].residuals(&g, Some(&self.sg[k])));
+                comp += self.rg[k].complementarity() + self.sg[k].complementarity();
+                let (r, scale) = self.sg[k].residuals(&self.rg[k]);
+                soft = [soft[0].max(r), soft[1].max(scale)];
+            }
+        }
+        let t = &qp.terminal;
+        let xn = self.sol.xn;
+        self.hxn = mul(&t.q, &xn) + t.gx;
+        ri = ri.max(self.rxn.residuals(&xn, None));
+        comp += self.rxn.complementarity();
+        if NGN > 0 {
+            ri = ri.max(self.rgn.residuals(&mul(&t.c, &xn), Some(&self.sgn)));
+            comp += self.rgn.complementarity() + self.sgn.complementarity();
+            let (r, scale) = self.sgn.residuals(&self.rgn);
+            soft = [soft[0].max(r), soft[1].max(scale)];
+        }
+        self.soft_stat = soft;
+        [T::ZERO, re, ri, comp]
+    }
+
+    /// The stationarity residual at the point of the last [`residuals`](Self::residuals)
+    /// call, relative to the largest of its terms (`H y + g`, `A'pi`, `B'pi`, `pi`, the bound
+    /// multipliers, and for soft rows the slack penalty terms and multipliers) when that
+    /// exceeds 1: rounding makes it no smaller than about `eps` times that. Soft rows'
+    /// stationarity `l1 + l2 s - lam - m` is part of it. Only computed when the other
+    /// residuals would let the iteration stop (or it ends): it costs about as much as they do.
+    fn stationarity(&self, qp: &OcpQp<T, NX, NU, NG, NGN, N>) -> T {
+        let [mut rs, soft_scale] = self.soft_stat;
+        let mut gscale = soft_scale.max(T::ONE);
+        for k in 0..N {
+            let s = &qp.stages[k];
+            gscale = gscale.max(self.hu[k].amax());
             // Stationarity with the current multipliers, and the size of its terms.
             let gd = self.rg[k].dual();
             let bpi = tr_mul(&s.b, &self.sol.pi[k]);
             let ud = self.ru[k].dual();
             let dgd = tr_mul(&s.d, &gd);
             let su = self.hu[k] + bpi - ud - dgd;
-            rs = rs.max(max_abs(su.as_slice()));
+            rs = rs.max(su.amax());
             gscale = gscale.max(bpi.amax()).max(ud.amax()).max(dgd.amax());
             if k > 0 {
                 let api = tr_mul(&s.a, &self.sol.pi[k]);
                 let xd = self.rx[k].dual();
                 let cgd = tr_mul(&s.c, &gd);
                 let sx = self.hx[k] + api - self.sol.pi[k - 1] - xd - cgd;
-                rs = rs.max(max_abs(sx.as_slice()));
+                rs = rs.max(sx.amax());
                 gscale = gscale
+                    .max(self.hx[k].amax())
                     .max(api.amax())
                     .max(self.sol.pi[k - 1].amax())
                     .max(xd.amax())
@@ -1032,27 +1083,17 @@ impl<
             }
         }
         let t = &qp.terminal;
-        let xn = self.sol.xn;
-        self.hxn = t.q * xn + t.gx;
         gscale = gscale.max(self.hxn.amax());
-        ri = ri
-            .max(self.rxn.residuals(&xn, None))
-            .max(self.rgn.residuals(&(t.c * xn), Some(&self.sgn)));
-        comp +=
-            self.rxn.complementarity() + self.rgn.complementarity() + self.sgn.complementarity();
-        let (srs, sscale) = self.sgn.residuals(&self.rgn);
-        rs = rs.max(srs);
-        gscale = gscale.max(sscale);
         if N > 0 {
             let (xd, cgd) = (self.rxn.dual(), tr_mul(&t.c, &self.rgn.dual()));
             let sx = self.hxn - self.sol.pi[N - 1] - xd - cgd;
-            rs = rs.max(max_abs(sx.as_slice()));
+            rs = rs.max(sx.amax());
             gscale = gscale
                 .max(self.sol.pi[N - 1].amax())
                 .max(xd.amax())
                 .max(cgd.amax());
         }
-        [rs / gscale, re, ri, comp]
+        rs / gscale
     }
 
     /// Backward Riccati factorization of the Newton system's Hessian: the interior point's
@@ -1070,76 +1111,89 @@ impl<
             return self.condensed_factorize();
         }
         let t = &qp.terminal;
-        let sg = weights(&self.rgn, Some(&self.sgn), active.map(|a| (&a.gn, a.w)));
-        let pn =
-            t.q + Mat::<T, NX, NX>::from_diagonal(&weights(
-                &self.rxn,
-                None,
-                active.map(|a| (&a.xn, a.w)),
-            )) + t.c.transpose() * Mat::<T, NGN, NGN>::from_diagonal(&sg) * t.c;
-        // P_{k+1} is built in place in pn[k] (P_N first), read there by stage k, which
-        // builds P_k in pn[k - 1].
+        // P_N = Q_N + Sigma_xN + C_N' Sigma_gN C_N, built in place in pn[N - 1].
         let Some(last) = self.pn.last_mut() else {
             return true;
         };
-        *last = pn;
+        *last = t.q;
+        add_diagonal(
+            last,
+            &weights(&self.rxn, None, active.map(|a| (&a.xn, a.w))),
+        );
+        if NGN > 0 {
+            let sg = weights(&self.rgn, Some(&self.sgn), active.map(|a| (&a.gn, a.w)));
+            mul_sparse_add_into(last, &diag_mul_transposed(&sg, &t.c), &t.c);
+        }
         symmetrize(last);
+        // P_{k+1} is read in pn[k] by stage k, which builds P_k in pn[k - 1].
         for k in (0..N).rev() {
             let s = &qp.stages[k];
             let (done, rest) = self.pn.split_at_mut(k);
             let Some(p) = rest.first() else {
                 return false;
             };
-            let sig_g = Mat::<T, NG, NG>::from_diagonal(&weights(
-                &self.rg[k],
-                Some(&self.sg[k]),
-                active.map(|a| (&a.g[k], a.w)),
-            ));
-            let dts = s.d.transpose() * sig_g;
             // Products with A and B on the right, where their zeros are skipped: with P
-            // symmetric, B'PB = (PB)'B, B'PA = (PB)'A, A'PA = (PA)'A.
-            let pa = mul_sparse(p, &s.a);
-            let pbt = mul_sparse(p, &s.b).transpose();
-            let rbar =
-                s.r + Mat::<T, NU, NU>::from_diagonal(&weights(
-                    &self.ru[k],
-                    None,
-                    active.map(|a| (&a.u[k], a.w)),
-                )) + dts * s.d
-                    + mul_sparse(&pbt, &s.b);
-            let sbar = s.s + dts * s.c + mul_sparse(&pbt, &s.a);
+            // symmetric, B'PB = (PB)'B, A'PB = (PA)'B, A'PA = (PA)'A.
+            let pb = mul_sparse(p, &s.b);
+            let mut rbar = s.r;
+            add_diagonal(
+                &mut rbar,
+                &weights(&self.ru[k], None, active.map(|a| (&a.u[k], a.w))),
+            );
+            mul_sparse_add_into(&mut rbar, &pb.transpose(), &s.b);
+            // S~' = S' + C' Sigma_g D + A'PB, transposed, so that every product with it
+            // runs down its columns.
+            let mut sbt = s.s.transpose();
+            let cts = if NG > 0 {
+                let w = weights(
+                    &self.rg[k],
+                    Some(&self.sg[k]),
+                    active.map(|a| (&a.g[k], a.w)),
+                );
+                mul_sparse_add_into(&mut rbar, &diag_mul_transposed(&w, &s.d), &s.d);
+                let cts = diag_mul_transposed(&w, &s.c);
+                mul_sparse_add_into(&mut sbt, &cts, &s.d);
+                Some(cts)
+            } else {
+                None
+            };
+            // A'P, for P_k and S~ (the first stage needs only S~: (PB)'A, transposed).
+            let atp = if k > 0 {
+                let atp = mul_sparse(p, &s.a).transpose();
+                mul_sparse_add_into(&mut sbt, &atp, &s.b);
+                Some(atp)
+            } else {
+                sbt += mul_sparse(&pb.transpose(), &s.a).transpose();
+                None
+            };
             let Some(chol) = regularized_cholesky(rbar, self.settings.reg) else {
                 return false;
             };
-            let kmat = -chol.solve(&sbar);
-            self.l[k] = chol.unpack();
-            self.sbar[k] = sbar;
-            self.kmat[k] = kmat;
-            if let Some(pk) = done.last_mut() {
-                *pk =
-                    s.q + Mat::<T, NX, NX>::from_diagonal(&weights(
-                        &self.rx[k],
-                        None,
-                        active.map(|a| (&a.x[k], a.w)),
-                    )) + s.c.transpose() * sig_g * s.c;
-                mul_sparse_add_into(pk, &pa.transpose(), &s.a);
-                tr_mul_add_into(pk, &sbar, &kmat);
-                symmetrize(pk);
-            }
-            if !finite_mat(&self.kmat[k]) {
+            // R~ = L L'. Stored: L^-1 and W' = S~'L^-T, so that the gain is K = -L^-T W and
+            // S~'R~^-1 S~ = W'W.
+            let linv = lower_inverse(&chol.unpack());
+            let wt = mul_tr(&sbt, &linv);
+            if !finite_mat(&wt) || !finite_mat(&linv) {
                 return false;
+            }
+            self.linv[k] = linv;
+            self.wt[k] = wt;
+            if let (Some(pk), Some(atp)) = (done.last_mut(), atp) {
+                // P_k = Q + Sigma_x + C' Sigma_g C + A'PA - W'W.
+                *pk = s.q;
+                add_diagonal(
+                    pk,
+                    &weights(&self.rx[k], None, active.map(|a| (&a.x[k], a.w))),
+                );
+                if let Some(cts) = cts {
+                    mul_sparse_add_into(pk, &cts, &s.c);
+                }
+                mul_sparse_add_into(pk, &atp, &s.a);
+                sub_mul_tr_sum(pk, &[wt], &[wt]);
+                symmetrize(pk);
             }
         }
         true
-    }
-
-    /// `x = (L L')^{-1} v` with the stored factor of stage `k`.
-    fn chol_solve(&self, k: usize, v: &Vect<T, NU>) -> Vect<T, NU> {
-        let l = &self.l[k];
-        let mut y = *v;
-        l.solve_lower_triangular_mut(&mut y);
-        l.tr_solve_lower_triangular_mut(&mut y);
-        y
     }
 
     /// Solves the Newton system for the given complementarity right-hand side and sets the
@@ -1187,26 +1241,28 @@ impl<
     /// dynamics residuals `rbt`, using the factorization of the last [`factorize`] call;
     /// writes `dx`, `du`, `dxn` and `pi_new`.
     fn lq_solve(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N>) {
+        // With R~ = L L' and W' = S~'L^-T (`factorize`), the feedforward control
+        // -R~^-1 (g~ + B'(P rb + p)) is -L^-T y for y = L^-1 (g~ + B'(P rb + p)), kept in `kv`,
+        // and the control is du = K dx - L^-T y = -L^-T (W dx + y).
         let mut pv = self.gnt;
         for k in (0..N).rev() {
             let s = &qp.stages[k];
             self.pvn[k] = pv;
-            let pb = self.pn[k] * self.rbt[k] + pv;
-            let rbar = self.gut[k] + tr_mul(&s.b, &pb);
-            let kv = -self.chol_solve(k, &rbar);
-            self.kv[k] = kv;
+            let pb = mul(&self.pn[k], &self.rbt[k]) + pv;
+            let y = mul(&self.linv[k], &(self.gut[k] + tr_mul(&s.b, &pb)));
+            self.kv[k] = y;
             if k > 0 {
-                pv = self.gxt[k] + tr_mul(&s.a, &pb) + tr_mul(&self.sbar[k], &kv);
+                pv = self.gxt[k] + tr_mul(&s.a, &pb) - mul(&self.wt[k], &y);
             }
         }
         let mut dx = Vect::<T, NX>::zeros();
         for k in 0..N {
             let s = &qp.stages[k];
             self.dx[k] = dx;
-            let du = self.kmat[k] * dx + self.kv[k];
+            let du = -tr_mul(&self.linv[k], &(tr_mul(&self.wt[k], &dx) + self.kv[k]));
             self.du[k] = du;
-            let next = s.a * dx + s.b * du + self.rbt[k];
-            self.pi_new[k] = self.pn[k] * next + self.pvn[k];
+            let next = mul_sparse(&s.a, &dx) + mul_sparse(&s.b, &du) + self.rbt[k];
+            self.pi_new[k] = mul(&self.pn[k], &next) + self.pvn[k];
             dx = next;
         }
         self.dxn = dx;

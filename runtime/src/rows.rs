@@ -26,6 +26,9 @@ pub(crate) struct Rows<T: Real, const K: usize> {
     pub hi: SVector<T, K>,
     pub has_lo: [bool; K],
     pub has_hi: [bool; K],
+    /// Some side is present (else every method below is a no-op or returns zeros, without
+    /// a pass over the rows: stages without state bounds are the common case).
+    any: bool,
     pub tl: SVector<T, K>,
     pub tu: SVector<T, K>,
     pub ll: SVector<T, K>,
@@ -59,6 +62,7 @@ impl<T: Real, const K: usize> Rows<T, K> {
             hi: z,
             has_lo: [false; K],
             has_hi: [false; K],
+            any: false,
             tl: z,
             tu: z,
             ll: z,
@@ -83,6 +87,7 @@ impl<T: Real, const K: usize> Rows<T, K> {
         hi: &SVector<T, K>,
         active: bool,
     ) -> Result<(), BoundError> {
+        self.any = false;
         for i in 0..K {
             let (l, h) = (lo[i], hi[i]);
             if l.nan() || h.nan() {
@@ -95,6 +100,7 @@ impl<T: Real, const K: usize> Rows<T, K> {
             }
             self.has_lo[i] = hl;
             self.has_hi[i] = hh;
+            self.any |= hl || hh;
             self.lo[i] = if hl { l } else { T::ZERO };
             self.hi[i] = if hh { h } else { T::ZERO };
         }
@@ -113,6 +119,10 @@ impl<T: Real, const K: usize> Rows<T, K> {
     /// Starting slacks and multipliers for row values `v`: slack at least `floor`,
     /// multiplier `mu0 / slack`.
     pub fn init(&mut self, v: &SVector<T, K>, floor: T, mu0: T) {
+        if !self.any {
+            self.clear();
+            return;
+        }
         for i in 0..K {
             if self.has_lo[i] {
                 self.tl[i] = (v[i] - self.lo[i]).max(floor);
@@ -134,6 +144,10 @@ impl<T: Real, const K: usize> Rows<T, K> {
     /// Warm start from the multipliers of the previous solve: slacks from the row values
     /// (at least `t_floor`), multipliers kept (at least `lam_floor`).
     pub fn warm_init(&mut self, v: &SVector<T, K>, t_floor: T, lam_floor: T) {
+        if !self.any {
+            self.clear();
+            return;
+        }
         for i in 0..K {
             if self.has_lo[i] {
                 self.tl[i] = (v[i] - self.lo[i]).max(t_floor);
@@ -152,10 +166,21 @@ impl<T: Real, const K: usize> Rows<T, K> {
         }
     }
 
+    /// Every side absent: slacks 1, multipliers, residuals and directions 0.
+    fn clear(&mut self) {
+        let (z, one) = (SVector::<T, K>::zeros(), SVector::<T, K>::repeat(T::ONE));
+        (self.tl, self.tu, self.ll, self.lu) = (one, one, z, z);
+        (self.ri_l, self.ri_u) = (z, z);
+        (self.dtl, self.dtu, self.dll, self.dlu) = (z, z, z, z);
+    }
+
     /// Primal residuals `v - lo - t_l` and `hi - v - t_u` (plus the slack `s_l` / `s_u` of a
     /// soft side); returns their largest magnitude.
     #[inline]
     pub fn residuals(&mut self, v: &SVector<T, K>, soft: Option<&Soft<T, K>>) -> T {
+        if !self.any {
+            return T::ZERO;
+        }
         match soft {
             Some(sf) if sf.any => self.residuals_soft(v, sf),
             _ => self.residuals_hard(v),
@@ -207,6 +232,9 @@ impl<T: Real, const K: usize> Rows<T, K> {
     /// `sum t lam` over present sides.
     pub fn complementarity(&self) -> T {
         let mut s = T::ZERO;
+        if !self.any {
+            return s;
+        }
         for i in 0..K {
             if self.has_lo[i] {
                 s += self.tl[i] * self.ll[i];
@@ -233,6 +261,9 @@ impl<T: Real, const K: usize> Rows<T, K> {
     pub fn sigma(&self, soft: Option<&Soft<T, K>>) -> SVector<T, K> {
         let cap = T::SIGMA_MAX;
         let mut s = SVector::<T, K>::zeros();
+        if !self.any {
+            return s;
+        }
         match soft {
             Some(sf) if sf.any => {
                 for i in 0..K {
@@ -289,6 +320,9 @@ impl<T: Real, const K: usize> Rows<T, K> {
     /// `-sig b / den` (upper), see [`Soft`].
     #[inline]
     pub fn gradient(&self, rhs: Rhs<T>, soft: Option<&Soft<T, K>>) -> SVector<T, K> {
+        if !self.any {
+            return SVector::zeros();
+        }
         match soft {
             Some(sf) if sf.any => self.gradient_soft(rhs, sf),
             _ => self.gradient_hard(rhs),
@@ -339,6 +373,9 @@ impl<T: Real, const K: usize> Rows<T, K> {
     /// soft slacks, recovered from `dv`).
     #[inline]
     pub fn direction(&mut self, dv: &SVector<T, K>, rhs: Rhs<T>, soft: Option<&mut Soft<T, K>>) {
+        if !self.any {
+            return;
+        }
         match soft {
             Some(sf) if sf.any => self.direction_soft(dv, rhs, sf),
             _ => self.direction_hard(dv, rhs),
@@ -412,6 +449,9 @@ impl<T: Real, const K: usize> Rows<T, K> {
 
     /// Largest step in `(0, alpha]` keeping every slack and multiplier nonnegative.
     pub fn max_step(&self, mut alpha: T) -> T {
+        if !self.any {
+            return alpha;
+        }
         let pairs = [
             (&self.tl, &self.dtl, &self.has_lo),
             (&self.ll, &self.dll, &self.has_lo),
@@ -431,6 +471,9 @@ impl<T: Real, const K: usize> Rows<T, K> {
     /// `sum (t + alpha dt)(lam + alpha dlam)` over present sides.
     pub fn complementarity_after(&self, alpha: T) -> T {
         let mut s = T::ZERO;
+        if !self.any {
+            return s;
+        }
         for i in 0..K {
             if self.has_lo[i] {
                 s += (self.tl[i] + alpha * self.dtl[i]) * (self.ll[i] + alpha * self.dll[i]);
@@ -444,6 +487,9 @@ impl<T: Real, const K: usize> Rows<T, K> {
 
     /// Takes the step.
     pub fn update(&mut self, alpha: T) {
+        if !self.any {
+            return;
+        }
         for i in 0..K {
             if self.has_lo[i] {
                 self.tl[i] += alpha * self.dtl[i];

@@ -29,8 +29,8 @@
 
 use super::{Mat, OcpQp, QpMethod, QpSolver, Vect, condensing_pays, regularized_cholesky};
 use crate::kernels::{
-    add_mul_sum, mul, mul_sparse, mul_sparse_add_into, mul_sparse_into, mul_tr, sub_mul_tr_sum,
-    symmetrize, tr_mul, tr_mul_add_into,
+    add_mul_sum, lower_inverse, mul, mul_sparse, mul_sparse_add_into, mul_sparse_into, mul_tr,
+    sub_mul_tr_sum, symmetrize, tr_mul, tr_mul_add_into,
 };
 use crate::real::Real;
 use crate::rows::Rhs;
@@ -395,23 +395,6 @@ impl<
     }
 }
 
-/// Inverse of a lower-triangular matrix with a nonzero diagonal (a Cholesky factor), by
-/// forward substitution column by column.
-fn lower_inverse<T: Real, const K: usize>(l: &Mat<T, K, K>) -> Mat<T, K, K> {
-    let mut inv = Mat::<T, K, K>::zeros();
-    for j in 0..K {
-        inv[(j, j)] = T::ONE / l[(j, j)];
-        for i in j + 1..K {
-            let mut acc = T::ZERO;
-            for k in j..i {
-                acc += l[(i, k)] * inv[(k, j)];
-            }
-            inv[(i, j)] = -acc / l[(i, i)];
-        }
-    }
-    inv
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -427,20 +410,5 @@ mod tests {
         assert!(!condensing_pays(10, 4, 1000));
         // No overflow panic for absurd dimensions (the products saturate).
         let _ = condensing_pays(usize::MAX, usize::MAX, usize::MAX);
-    }
-
-    #[test]
-    fn lower_inverse_inverts() {
-        let l = Mat::<f64, 4, 4>::from_fn(|i, j| {
-            if i == j {
-                1.5 + i as f64
-            } else if i > j {
-                0.3 * (i + 2 * j) as f64 - 0.4
-            } else {
-                0.0
-            }
-        });
-        let err = (lower_inverse(&l) * l - Mat::<f64, 4, 4>::identity()).amax();
-        assert!(err < 1e-14, "{err}");
     }
 }
