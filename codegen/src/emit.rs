@@ -748,6 +748,7 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
     };
     let n1 = ul(l.n + 1);
     let nc = ul(condensing_storage(l, opts));
+    let constant_jacobians = l.constant_residual_jacobians;
     let model_name = &l.name;
     let solver_doc = doc_lines(&format!(
         "The NMPC solver of `{model_name}`: horizon {n}, {} s per interval, one real-time \
@@ -883,6 +884,8 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
         pub struct Model;
 
         impl mpc_runtime::Model<Real, NX, NU, NP, NY, NYN, NG, NGN> for Model {
+            const CONSTANT_RESIDUAL_JACOBIANS: bool = #constant_jacobians;
+
             fn dynamics(
                 &self,
                 x: &SVector<Real, NX>,

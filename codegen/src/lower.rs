@@ -122,6 +122,9 @@ pub struct Lowered {
     pub residual: Function,
     /// `y_N`, `J_x`.
     pub terminal_residual: Function,
+    /// Every entry of `J_x`, `J_u` and the terminal `J_x` is a constant (the residuals are
+    /// linear in the states and controls, whatever the parameters).
+    pub constant_residual_jacobians: bool,
     /// `h`, `C_x`, `C_u` (when `ng > 0`).
     pub constraints: Option<Function>,
     /// `h_N`, `C_x` (when `ngn > 0`).
@@ -500,8 +503,10 @@ pub fn lower<'g>(ocp: &Ocp<'g>) -> Result<Lowered, CodegenError> {
     let (ny, nyn) = (y.len(), yn.len());
     let mut wrt = x.clone();
     wrt.extend(u.iter().copied());
+    let mut constant_residual_jacobians = true;
     let residual = {
         let jac = g.jacobian(&y, &wrt)?;
+        constant_residual_jacobians &= jac.iter().all(|(_, _, e)| e.as_constant().is_some());
         let mut out: Vec<_> = y
             .iter()
             .enumerate()
@@ -519,6 +524,7 @@ pub fn lower<'g>(ocp: &Ocp<'g>) -> Result<Lowered, CodegenError> {
     };
     let terminal_residual = {
         let jac = g.jacobian(&yn, &x)?;
+        constant_residual_jacobians &= jac.iter().all(|(_, _, e)| e.as_constant().is_some());
         let mut out: Vec<_> = yn
             .iter()
             .enumerate()
@@ -696,6 +702,7 @@ pub fn lower<'g>(ocp: &Ocp<'g>) -> Result<Lowered, CodegenError> {
         dynamics,
         residual,
         terminal_residual,
+        constant_residual_jacobians,
         constraints,
         terminal_constraints,
         weights,

@@ -27,6 +27,15 @@ pub trait Model<
     const NGN: usize,
 >
 {
+    /// The Jacobians of [`residual`](Self::residual) and
+    /// [`terminal_residual`](Self::terminal_residual) are constants, the same at every
+    /// `x`, `u`, `p` (residuals linear in `x` and `u`, as `x - xref`): the RTI then computes
+    /// the Gauss-Newton terms `J'WJ` once per weight change instead of at every stage of every
+    /// linearization. `false` (the default) is always correct; `true` for a residual whose
+    /// Jacobians do change makes the QP's Hessians stale. The generator sets it from the
+    /// symbolic Jacobians.
+    const CONSTANT_RESIDUAL_JACOBIANS: bool = false;
+
     /// `F(x, u, p)` with `A = dF/dx` and `B = dF/du`.
     fn dynamics(
         &self,

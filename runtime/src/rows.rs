@@ -109,6 +109,9 @@ impl<T: Real, const K: usize> Rows<T, K> {
 
     /// Number of present sides.
     pub fn count(&self) -> usize {
+        if !self.any {
+            return 0;
+        }
         self.has_lo
             .iter()
             .chain(&self.has_hi)

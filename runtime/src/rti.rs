@@ -15,7 +15,7 @@
 
 use nalgebra::{SMatrix, SVector};
 
-use crate::kernels::{mul, mul_sparse_into, scaled_transpose};
+use crate::kernels::{mul, mul_mostly_zero_into, scaled_transpose};
 use crate::model::Model;
 use crate::qp::{OcpQp, QpInfo, QpSettings, QpSolver, QpStatus};
 use crate::real::Real;
@@ -173,6 +173,10 @@ pub struct Rti<
     l2n: SVector<T, NGN>,
     /// Some penalty is positive (the merit function then evaluates the constraints).
     any_soft: bool,
+    /// The stages' Gauss-Newton terms `J'WJ` are those of the current weights; kept from one
+    /// linearization to the next when the model's residual Jacobians are constant
+    /// ([`Model::CONSTANT_RESIDUAL_JACOBIANS`]).
+    gn_current: bool,
     plan: [SVector<T, NU>; N],
     plan_age: usize,
     prepared: bool,
@@ -317,6 +321,7 @@ impl<
             l1n: crate::zeros(),
             l2n: crate::zeros(),
             any_soft: false,
+            gn_current: false,
             plan: [crate::zeros(); N],
             plan_age: 0,
             prepared: false,
@@ -346,6 +351,7 @@ impl<
         self.wn = wn * half + wn.transpose() * half;
         self.w_diag = is_diagonal(w);
         self.wn_diag = is_diagonal(wn);
+        self.gn_current = false;
         Ok(())
     }
 
@@ -547,6 +553,8 @@ impl<
     }
 
     fn linearize(&mut self) {
+        // With constant residual Jacobians, J'WJ changes only with the weights.
+        let gn = !(M::CONSTANT_RESIDUAL_JACOBIANS && self.gn_current);
         for k in 0..N {
             let (x, u, p) = (self.x[k], self.u[k], self.p[k]);
             let next = if k + 1 < N { self.x[k + 1] } else { self.xn };
@@ -567,9 +575,11 @@ impl<
             } else {
                 ((self.w * jx).transpose(), (self.w * ju).transpose())
             };
-            mul_sparse_into(&mut s.q, &wjxt, &jx);
-            mul_sparse_into(&mut s.s, &wjut, &jx);
-            mul_sparse_into(&mut s.r, &wjut, &ju);
+            if gn {
+                mul_mostly_zero_into(&mut s.q, &wjxt, &jx);
+                mul_mostly_zero_into(&mut s.s, &wjut, &jx);
+                mul_mostly_zero_into(&mut s.r, &wjut, &ju);
+            }
             s.gx = mul(&wjxt, &r);
             s.gu = mul(&wjut, &r);
             s.lbx = self.lbx - x;
@@ -591,7 +601,9 @@ impl<
         } else {
             (self.wn * jx).transpose()
         };
-        mul_sparse_into(&mut t.q, &wjxt, &jx);
+        if gn {
+            mul_mostly_zero_into(&mut t.q, &wjxt, &jx);
+        }
         t.gx = mul(&wjxt, &r);
         t.lbx = self.lbx - xn;
         t.ubx = self.ubx - xn;
@@ -600,6 +612,7 @@ impl<
         t.ug = self.ugn - h;
         t.soft_l1 = self.l1n;
         t.soft_l2 = self.l2n;
+        self.gn_current = true;
     }
 
     /// Feedback phase: embeds the measured state, solves the QP prepared by

@@ -164,7 +164,7 @@ fn gauss_newton_terms_match_j_w_j_for_diagonal_and_dense_weights() {
     let x = SVector::<f64, NX>::from([0.3, -0.2, 1.9, 0.9, 0.1, -0.2, 0.3, 0.5, -0.4, 0.2]);
     let u = SVector::<f64, NU>::from([9.0, 0.3, -0.2, 0.1]);
     s.set_guess(&x, &u).unwrap();
-    let model = Quadrotor { dt: 0.04 };
+    let model = Quadrotor::<f64> { dt: 0.04 };
     let mut w_diag = SMatrix::<f64, NY, NY>::zeros();
     for i in 0..NY {
         w_diag[(i, i)] = 1.0 + i as f64;
@@ -197,6 +197,51 @@ fn gauss_newton_terms_match_j_w_j_for_diagonal_and_dense_weights() {
         assert!((st.gx - jx.transpose() * w * (y - yref)).amax() < tol * 10.0);
         assert!((st.gu - ju.transpose() * w * (y - yref)).amax() < tol * 10.0);
     }
+}
+
+/// A model that declares its residual Jacobians constant (`J'WJ` then kept between
+/// linearizations) flies the same closed loop bit for bit as the same model without the
+/// declaration, through weight changes: every QP has the same Hessians, and after a
+/// `set_weights` they are the new weights' `J'WJ`, not the old ones kept.
+#[test]
+fn constant_residual_jacobians_keep_j_w_j_until_the_weights_change() {
+    use support::quadrotor::qrbench_constant_jacobians;
+    let dt = 0.05;
+    let (mut a, mut b) = (qrbench::<20>(dt), qrbench_constant_jacobians::<20>(dt));
+    let mut x = SVector::<f64, NX>::from(X0);
+    for k in 0..40 {
+        if k == 15 || k == 30 {
+            // Heavier position weights, then a dense coupling (the product path).
+            let scale = if k == 15 { 3.0 } else { 0.5 };
+            let mut w = nalgebra::SMatrix::<f64, 14, 14>::zeros();
+            for i in 0..14 {
+                w[(i, i)] = if i < 3 {
+                    100.0 * scale
+                } else {
+                    1.0 + 0.1 * i as f64
+                };
+            }
+            if k == 30 {
+                w[(0, 1)] = 5.0;
+                w[(1, 0)] = 5.0;
+            }
+            let wn = nalgebra::SMatrix::<f64, NX, NX>::identity() * (50.0 * scale);
+            a.set_weights(&w, &wn).unwrap();
+            b.set_weights(&w, &wn).unwrap();
+        }
+        a.prepare();
+        b.prepare();
+        for (sa, sb) in a.qp().stages.iter().zip(&b.qp().stages) {
+            assert_eq!((sa.q, sa.s, sa.r), (sb.q, sb.s, sb.r), "step {k}");
+        }
+        assert_eq!(a.qp().terminal.q, b.qp().terminal.q, "step {k}");
+        let (ua, ia) = a.feedback(&x);
+        let (ub, ib) = b.feedback(&x);
+        assert_eq!(ia.status, RtiStatus::Ok, "step {k}");
+        assert_eq!((ua, ia), (ub, ib), "step {k}");
+        x = plant(&x, &ua, dt, 10);
+    }
+    assert_eq!(a.qp().stages[7].q[(0, 1)], 5.0, "the last weights' J'WJ");
 }
 
 /// `Rti::unconfigured` (every field zero, so that a `static` of it is zero-filled memory)

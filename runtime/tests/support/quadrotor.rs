@@ -10,8 +10,10 @@ pub const NY: usize = 14;
 pub const G: f64 = 9.81;
 
 /// One RK4 step of length `dt` per shooting interval; residual y = (x, u), terminal y = x.
+/// `CONST_J`: whether it declares its (constant) residual Jacobians constant
+/// (`Model::CONSTANT_RESIDUAL_JACOBIANS`); the default keeps the solver's general path.
 #[derive(Clone, Copy, Debug)]
-pub struct Quadrotor<T> {
+pub struct Quadrotor<T, const CONST_J: bool = false> {
     pub dt: T,
 }
 
@@ -116,7 +118,9 @@ pub fn plant(
     x
 }
 
-impl<T: Real> Model<T, NX, NU, 0, NY, NX, 0, 0> for Quadrotor<T> {
+impl<T: Real, const CONST_J: bool> Model<T, NX, NU, 0, NY, NX, 0, 0> for Quadrotor<T, CONST_J> {
+    const CONSTANT_RESIDUAL_JACOBIANS: bool = CONST_J;
+
     fn dynamics(
         &self,
         x: &SVector<T, NX>,
@@ -171,8 +175,8 @@ pub const U_HI: [f64; NU] = [20.0, 20.0, 20.0, 6.0];
 
 /// The RTI solver of QR-bench with horizon `N`, in precision `T`; `NC = N` gives it storage
 /// for condensing (`NC = 0`: the Riccati recursion only).
-pub type QrSolver<T, const N: usize, const NC: usize = 0> =
-    Rti<T, Quadrotor<T>, NX, NU, 0, NY, NX, 0, 0, N, NC>;
+pub type QrSolver<T, const N: usize, const NC: usize = 0, const CONST_J: bool = false> =
+    Rti<T, Quadrotor<T, CONST_J>, NX, NU, 0, NY, NX, 0, 0, N, NC>;
 
 /// A QR-bench solver in `f64` (Riccati recursion); see [`qrbench_in`].
 pub fn qrbench<const N: usize>(dt: f64) -> Box<QrSolver<f64, N>> {
@@ -200,7 +204,16 @@ pub fn qrbench_unconfigured<T: Real, const N: usize, const NC: usize>(
     s
 }
 
-fn configure<T: Real, const N: usize, const NC: usize>(s: &mut QrSolver<T, N, NC>) {
+/// [`qrbench_in`] in f64 with the model declaring its residual Jacobians constant.
+pub fn qrbench_constant_jacobians<const N: usize>(dt: f64) -> Box<QrSolver<f64, N, 0, true>> {
+    let mut s = Box::new(QrSolver::<f64, N, 0, true>::new(Quadrotor { dt }));
+    configure(&mut s);
+    s
+}
+
+fn configure<T: Real, const N: usize, const NC: usize, const CONST_J: bool>(
+    s: &mut QrSolver<T, N, NC, CONST_J>,
+) {
     let c = |v: f64| T::lit(v);
     let mut w = SMatrix::<T, NY, NY>::zeros();
     let mut wn = SMatrix::<T, NX, NX>::zeros();
