@@ -160,7 +160,9 @@ fn main() -> ! {
     let mut x: [Real; NX_MODEL] = [0.0, 0.0, 2.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
     let mut iterations = 0u32;
     let mut all_ok = true;
-    let (mut prep_sum, mut prep_max, mut fb_sum, mut fb_max) = (0u64, 0u32, 0u64, 0u32);
+    // Ticks, not instructions, and u32 throughout: u64 arithmetic and printing would add 1 KB
+    // of flash (this closed loop sums to some 25 M ticks; the products below saturate).
+    let (mut prep_sum, mut prep_max, mut fb_sum, mut fb_max) = (0u32, 0u32, 0u32, 0u32);
     let (mut rti_max, mut rti_min) = (0u32, u32::MAX);
     let (mut stack_prepare, mut stack_feedback) = (0, 0);
     for k in 0..STEPS {
@@ -189,8 +191,8 @@ fn main() -> ! {
         }
         all_ok &= info.status == RtiStatus::Ok;
         iterations += info.qp.iterations;
-        prep_sum += u64::from(prep);
-        fb_sum += u64::from(fb);
+        prep_sum = prep_sum.saturating_add(prep);
+        fb_sum = fb_sum.saturating_add(fb);
         prep_max = prep_max.max(prep);
         fb_max = fb_max.max(fb);
         rti_max = rti_max.max(prep + fb);
@@ -209,8 +211,8 @@ fn main() -> ! {
 
     let d = [x[0] - 4.0, x[1], x[2] - 2.0];
     let err = libm::sqrtf(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
-    let ipt = u64::from(INSNS_PER_TICK);
-    let steps = STEPS as u64;
+    let ipt = INSNS_PER_TICK;
+    let steps = STEPS as u32;
     // No float formatting (core::fmt's took 24 KB of flash; README.md here): the mean as
     // hundredths, the error in micrometres, the final state as the bits of each f32 (exact).
     hprintln!(
@@ -224,16 +226,16 @@ fn main() -> ! {
     hprintln!("x_final_bits={:08x?}", x.map(Real::to_bits));
     hprintln!(
         "insns/RTI step: mean={} min={} max={}",
-        (prep_sum + fb_sum) * ipt / steps,
-        u64::from(rti_min) * ipt,
-        u64::from(rti_max) * ipt
+        prep_sum.saturating_add(fb_sum).saturating_mul(ipt) / steps,
+        rti_min.saturating_mul(ipt),
+        rti_max.saturating_mul(ipt)
     );
     hprintln!(
         "insns prepare: mean={} max={}; feedback (set_x0+feedback): mean={} max={}",
-        prep_sum * ipt / steps,
-        u64::from(prep_max) * ipt,
-        fb_sum * ipt / steps,
-        u64::from(fb_max) * ipt
+        prep_sum.saturating_mul(ipt) / steps,
+        prep_max.saturating_mul(ipt),
+        fb_sum.saturating_mul(ipt) / steps,
+        fb_max.saturating_mul(ipt)
     );
     let (bottom, top) = stack_bounds();
     hprintln!(
