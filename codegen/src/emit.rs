@@ -317,6 +317,13 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
         Some(quote!(SVector<Real, NX>)),
         &mut uses,
     );
+    let dynv_body = body(
+        &l.dynamics_value,
+        s,
+        &[],
+        Some(quote!(SVector<Real, NX>)),
+        &mut uses,
+    );
     let dyn_doc = doc_lines(&format!(
         "Discrete dynamics over one interval ({} s, {}): returns `F(x, u, p)` and writes \
          `a = dF/dx`, `b = dF/du`.{}",
@@ -842,6 +849,17 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
                 #dyn_body
             }
 
+            /// [`dynamics`]'s `F(x, u, p)` alone, without the Jacobians (the full SQP's merit
+            /// function).
+            #[allow(unused_variables, unused_mut, unused_assignments)]
+            pub fn dynamics_value(
+                x: &SVector<Real, NX>,
+                u: &SVector<Real, NU>,
+                p: &SVector<Real, NP>,
+            ) -> SVector<Real, NX> {
+                #dynv_body
+            }
+
             #res_doc
             #[allow(unused_variables, unused_mut, unused_assignments)]
             pub fn residual(
@@ -895,6 +913,15 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
                 b: &mut SMatrix<Real, NX, NU>,
             ) -> SVector<Real, NX> {
                 functions::dynamics(x, u, p, a, b)
+            }
+
+            fn dynamics_value(
+                &self,
+                x: &SVector<Real, NX>,
+                u: &SVector<Real, NU>,
+                p: &SVector<Real, NP>,
+            ) -> SVector<Real, NX> {
+                functions::dynamics_value(x, u, p)
             }
 
             fn residual(

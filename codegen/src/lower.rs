@@ -118,6 +118,8 @@ pub struct Lowered {
     pub discretization: String,
     /// `F`, `A`, `B`.
     pub dynamics: Function,
+    /// `F` alone.
+    pub dynamics_value: Function,
     /// `y`, `J_x`, `J_u`.
     pub residual: Function,
     /// `y_N`, `J_x`.
@@ -443,7 +445,15 @@ pub fn lower<'g>(ocp: &Ocp<'g>) -> Result<Lowered, CodegenError> {
             dyn_out.push((g.one(), Target::Mat("b", nxm + i, i)));
         }
     }
+    // `F` alone (the full SQP's merit function): the same expressions, without the
+    // sensitivities, which the program then does not compute.
+    let value_out: Vec<_> = dyn_out
+        .iter()
+        .filter(|(_, t)| matches!(t, Target::Ret(_)))
+        .cloned()
+        .collect();
     let dynamics = b.function("dynamics", &[Arg::X, Arg::U, Arg::P], dyn_out)?;
+    let dynamics_value = b.function("dynamics value", &[Arg::X, Arg::U, Arg::P], value_out)?;
 
     // ---- residuals and weights ----------------------------------------------------------
     let mut y: Vec<Expr<'_>> = Vec::new();
@@ -700,6 +710,7 @@ pub fn lower<'g>(ocp: &Ocp<'g>) -> Result<Lowered, CodegenError> {
         dt,
         discretization,
         dynamics,
+        dynamics_value,
         residual,
         terminal_residual,
         constant_residual_jacobians,

@@ -297,6 +297,8 @@ fn quadrotor_rates_functions_match_interpreter_and_finite_differences() {
             );
             let (mut a, mut b) = (SMatrix::zeros(), SMatrix::zeros());
             let f = m::functions::dynamics(&xs, &us, &ps, &mut a, &mut b);
+            // The value alone is the same program without the sensitivities: the same bits.
+            assert_eq!(m::functions::dynamics_value(&xs, &us, &ps), f);
             let want = interp(g, &fd_map, ocp, &x, &u, &p);
             for i in 0..m::NX {
                 assert!(
@@ -392,6 +394,8 @@ fn paper_pointmass_functions_match_interpreter() {
             );
             let (mut a, mut b) = (SMatrix::zeros(), SMatrix::zeros());
             let f = m::functions::dynamics(&xs, &us, &ps, &mut a, &mut b);
+            // The value alone is the same program without the sensitivities: the same bits.
+            assert_eq!(m::functions::dynamics_value(&xs, &us, &ps), f);
             let want = interp(g, &fd_map, ocp, xm, &u, &p);
             for i in 0..m::NX_MODEL {
                 assert!(rel_close(f[i], want[i], 1e-12), "F[{i}]");
@@ -681,6 +685,8 @@ fn quadrotor_probe_functions_constraint_and_closed_loop() {
             );
             let (mut a, mut b) = (SMatrix::zeros(), SMatrix::zeros());
             let f = m::functions::dynamics(&xs, &us, &ps, &mut a, &mut b);
+            // The value alone is the same program without the sensitivities: the same bits.
+            assert_eq!(m::functions::dynamics_value(&xs, &us, &ps), f);
             let want = interp(g, &fd_map, ocp, &x, &u, &p);
             for i in 0..m::NX {
                 assert!(

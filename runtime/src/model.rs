@@ -46,6 +46,20 @@ pub trait Model<
         b: &mut SMatrix<T, NX, NU>,
     ) -> SVector<T, NX>;
 
+    /// `F(x, u, p)` alone, for the full SQP's merit function. The default evaluates
+    /// [`dynamics`](Self::dynamics) and drops the Jacobians; the generator emits the value
+    /// without them (for QR-bench, 427 instructions a call against 3,022 with them).
+    fn dynamics_value(
+        &self,
+        x: &SVector<T, NX>,
+        u: &SVector<T, NU>,
+        p: &SVector<T, NP>,
+    ) -> SVector<T, NX> {
+        let mut a = SMatrix::<T, NX, NX>::zeros();
+        let mut b = SMatrix::<T, NX, NU>::zeros();
+        self.dynamics(x, u, p, &mut a, &mut b)
+    }
+
     /// Stage residual `y(x, u, p)` with its Jacobians.
     fn residual(
         &self,

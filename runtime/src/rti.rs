@@ -708,8 +708,6 @@ impl<
     fn merit(&self, nu: T) -> T {
         let mut cost = T::ZERO;
         let mut defect = T::ZERO;
-        let mut a = SMatrix::<T, NX, NX>::zeros();
-        let mut b = SMatrix::<T, NX, NU>::zeros();
         let mut jx = SMatrix::<T, NY, NX>::zeros();
         let mut ju = SMatrix::<T, NY, NU>::zeros();
         for k in 0..N {
@@ -717,7 +715,7 @@ impl<
             let next = if k + 1 < N { &self.x[k + 1] } else { &self.xn };
             let r = self.model.residual(x, u, p, &mut jx, &mut ju) - self.yref[k];
             cost += r.dot(&(self.w * r)) * T::lit(0.5);
-            let d = self.model.dynamics(x, u, p, &mut a, &mut b) - next;
+            let d = self.model.dynamics_value(x, u, p) - next;
             defect += d.abs().sum();
             if self.any_soft {
                 let mut cx = SMatrix::<T, NG, NX>::zeros();
