@@ -1001,8 +1001,9 @@ impl<
 
     /// Computes the residuals but stationarity, and `H y + g`; returns
     /// `[0, dynamics, inequality, sum t lam]` (for a condensed QP, stationarity in place of the
-    /// 0; otherwise see [`stationarity`](Self::stationarity), which needs this call first). Soft rows' slacks enter the inequality residual and
-    /// `s m` the complementarity. The dynamics and inequality residuals are absolute.
+    /// 0; otherwise see [`stationarity`](Self::stationarity), which needs this call first).
+    /// Soft rows' slacks enter the inequality residual and `s m` the complementarity. The
+    /// dynamics and inequality residuals are absolute.
     fn residuals(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N>) -> [T; 4] {
         if self.condensed {
             return self.condensed_residuals();
