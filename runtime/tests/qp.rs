@@ -755,3 +755,33 @@ fn dual_warm_start_gives_the_same_solution_faster() {
         );
     }
 }
+
+/// A solver whose last QP had state bounds solves a QP without them as a new solver does, bit
+/// for bit (the rows without bounds are skipped and their old multipliers cleared), and the
+/// bounded QP again as it did the first time.
+#[test]
+fn state_bounds_removed_and_restored_leave_no_trace() {
+    type Solver = QpSolver<f64, 4, 2, 0, 0, 8>;
+    let plan = |s: &Solver| {
+        let sol = s.solution();
+        let xs: Vec<_> = (0..=8).map(|k| *sol.state(k).unwrap()).collect();
+        (sol.u, xs, sol.pi)
+    };
+    for seed in [3u64, 17, 29] {
+        let bounded = random_qp::<4, 2, 0, 0, 8>(seed);
+        let free = control_bounded_qp::<4, 2, 8>(seed);
+        let mut used = Box::new(Solver::NEW);
+        let first = used.solve(&bounded);
+        assert_eq!(first.status, QpStatus::Solved, "seed {seed}: {first:?}");
+        let with_bounds = plan(&used);
+        let after = used.solve(&free);
+        assert_eq!(after.status, QpStatus::Solved, "seed {seed}: {after:?}");
+        let mut fresh = Box::new(Solver::NEW);
+        assert_eq!(after, fresh.solve(&free), "seed {seed}");
+        assert_eq!(plan(&used), plan(&fresh), "seed {seed}");
+        // The state bounds were active: the solutions differ.
+        assert_ne!(plan(&used).1, with_bounds.1, "seed {seed}");
+        assert_eq!(used.solve(&bounded), first, "seed {seed}");
+        assert_eq!(plan(&used), with_bounds, "seed {seed}");
+    }
+}
