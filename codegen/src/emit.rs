@@ -839,6 +839,9 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
 
             #dyn_doc
             #[allow(unused_variables, unused_mut, unused_assignments)]
+            // Thousands of instructions for one call site (the linearization): inlined, it
+            // only grows the code (by 516 B on the Cortex-M4F).
+            #[inline(never)]
             pub fn dynamics(
                 x: &SVector<Real, NX>,
                 u: &SVector<Real, NU>,
