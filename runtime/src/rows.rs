@@ -2,8 +2,9 @@
 //!
 //! Each present side has a slack and a multiplier:
 //! `t_l = v - lo >= 0`, `t_u = hi - v >= 0`, `lam_l, lam_u >= 0`, complementarity
-//! `t_l lam_l = t_u lam_u = mu`. An absent side (infinite bound) keeps `t = 1`, `lam = 0` and
-//! takes no part in anything.
+//! `t_l lam_l = t_u lam_u = mu`. An absent side (infinite bound) takes no part in anything;
+//! its multiplier and directions are 0 (its slack 1 once a solve has set it). A set of rows
+//! without any present side is skipped by every method.
 
 use nalgebra::SVector;
 
