@@ -155,17 +155,16 @@ pub(crate) fn symmetrize<T: Real, const K: usize>(m: &mut SMatrix<T, K, K>) {
     }
 }
 
-/// `(diag(w) m)'` for a diagonal `w`: row `i` of `m` scaled by `w_ii`, transposed, in one
-/// pass.
+/// `(diag(w) m)' = m' diag(w)`: row `i` of `m` scaled by `w_i`, transposed, in one pass.
 #[inline(always)]
 pub(crate) fn scaled_transpose<T: Real, const K: usize, const C: usize>(
-    w: &SMatrix<T, K, K>,
+    w: &SMatrix<T, K, 1>,
     m: &SMatrix<T, K, C>,
 ) -> SMatrix<T, C, K> {
-    let (wd, md) = (&w.data.0, &m.data.0);
+    let md = &m.data.0;
     let mut out = [[T::ZERO; C]; K];
     for (i, o) in out.iter_mut().enumerate() {
-        let d = wd[i][i];
+        let d = w[i];
         for (j, oj) in o.iter_mut().enumerate() {
             *oj = md[j][i] * d;
         }
@@ -282,23 +281,6 @@ pub(crate) fn lower_inverse<T: Real, const K: usize>(l: &SMatrix<T, K, K>) -> SM
     inv
 }
 
-/// `m' diag(w)`: row `i` of `m` scaled by `w_i`, transposed, in one pass.
-#[inline(always)]
-pub(crate) fn diag_mul_transposed<T: Real, const K: usize, const C: usize>(
-    w: &SMatrix<T, K, 1>,
-    m: &SMatrix<T, K, C>,
-) -> SMatrix<T, C, K> {
-    let md = &m.data.0;
-    let mut out = [[T::ZERO; C]; K];
-    for (i, o) in out.iter_mut().enumerate() {
-        let d = w[i];
-        for (j, oj) in o.iter_mut().enumerate() {
-            *oj = md[j][i] * d;
-        }
-    }
-    SMatrix::from_array_storage(nalgebra::ArrayStorage(out))
-}
-
 /// `m += diag(w)`.
 #[inline(always)]
 pub(crate) fn add_diagonal<T: Real, const K: usize>(
@@ -338,11 +320,7 @@ mod tests {
         assert!((acc - SMatrix::repeat(-1.0) - a.transpose() * c).amax() < 1e-12);
         let w =
             SMatrix::<f64, 4, 4>::from_diagonal(&SMatrix::<f64, 4, 1>::new(1.0, -2.0, 0.5, 3.0));
-        assert!((scaled_transpose(&w, &b) - (w * b).transpose()).amax() < 1e-12);
-        assert_eq!(
-            diag_mul_transposed(&w.diagonal(), &b),
-            scaled_transpose(&w, &b)
-        );
+        assert!((scaled_transpose(&w.diagonal(), &b) - (w * b).transpose()).amax() < 1e-12);
         let mut sq4 = SMatrix::<f64, 4, 4>::repeat(0.5);
         add_diagonal(&mut sq4, &w.diagonal());
         assert_eq!(sq4, SMatrix::repeat(0.5) + w);

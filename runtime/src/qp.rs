@@ -36,7 +36,7 @@
 use nalgebra::{SMatrix, SVector};
 
 use crate::kernels::{
-    add_diagonal, diag_mul_transposed, lower_inverse, mul, mul_sparse, mul_sparse_add_into, mul_tr,
+    add_diagonal, lower_inverse, mul, mul_sparse, mul_sparse_add_into, mul_tr, scaled_transpose,
     sub_mul_tr_sum, symmetrize, tr_mul,
 };
 use crate::real::Real;
@@ -1123,7 +1123,7 @@ impl<
         );
         if NGN > 0 {
             let sg = weights(&self.rgn, Some(&self.sgn), active.map(|a| (&a.gn, a.w)));
-            mul_sparse_add_into(last, &diag_mul_transposed(&sg, &t.c), &t.c);
+            mul_sparse_add_into(last, &scaled_transpose(&sg, &t.c), &t.c);
         }
         symmetrize(last);
         // P_{k+1} is read in pn[k] by stage k, which builds P_k in pn[k - 1].
@@ -1151,8 +1151,8 @@ impl<
                     Some(&self.sg[k]),
                     active.map(|a| (&a.g[k], a.w)),
                 );
-                mul_sparse_add_into(&mut rbar, &diag_mul_transposed(&w, &s.d), &s.d);
-                let cts = diag_mul_transposed(&w, &s.c);
+                mul_sparse_add_into(&mut rbar, &scaled_transpose(&w, &s.d), &s.d);
+                let cts = scaled_transpose(&w, &s.c);
                 mul_sparse_add_into(&mut sbt, &cts, &s.d);
                 Some(cts)
             } else {

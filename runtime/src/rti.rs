@@ -568,10 +568,8 @@ impl<
             // right, where its zeros are skipped (a residual that selects states and
             // controls is mostly zeros), written into the stage in place.
             let (wjxt, wjut) = if self.w_diag {
-                (
-                    scaled_transpose(&self.w, &jx),
-                    scaled_transpose(&self.w, &ju),
-                )
+                let wd = self.w.diagonal();
+                (scaled_transpose(&wd, &jx), scaled_transpose(&wd, &ju))
             } else {
                 ((self.w * jx).transpose(), (self.w * ju).transpose())
             };
@@ -597,7 +595,7 @@ impl<
         let mut jx = SMatrix::<T, NYN, NX>::zeros();
         let r = self.model.terminal_residual(&xn, &pn, &mut jx) - self.yref_n;
         let wjxt = if self.wn_diag {
-            scaled_transpose(&self.wn, &jx)
+            scaled_transpose(&self.wn.diagonal(), &jx)
         } else {
             (self.wn * jx).transpose()
         };
