@@ -284,6 +284,21 @@ fn condensing_storage(l: &Lowered, opts: &Options) -> usize {
     if wanted { l.n } else { 0 }
 }
 
+/// `NBX` (the states with a bound, as the runtime sees them: below `Real::INF` in
+/// magnitude) and `NR` of the generated solver: `0` when it condenses (`nc = N`) and nothing
+/// but control bounds could stop it, `N` otherwise.
+fn bound_rows_and_riccati(l: &Lowered, nc: usize) -> (usize, usize) {
+    let inf = <f64 as mpc_runtime::Real>::INF;
+    let nbx = l
+        .lbx
+        .iter()
+        .zip(&l.ubx)
+        .filter(|&(&lo, &hi)| lo > -inf || hi < inf)
+        .count();
+    let dense_only = nc == l.n && nbx == 0 && l.ng == 0 && l.ngn == 0;
+    (nbx, if dense_only { 0 } else { l.n })
+}
+
 /// Upper-case constant name for a model name.
 fn const_name(prefix: &str, name: &str) -> Ident {
     format_ident!("{}_{}", prefix, name.to_uppercase())
@@ -754,7 +769,10 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
         }
     };
     let n1 = ul(l.n + 1);
-    let nc = ul(condensing_storage(l, opts));
+    let nc_raw = condensing_storage(l, opts);
+    let nc = ul(nc_raw);
+    let (nbx_raw, nr_raw) = bound_rows_and_riccati(l, nc_raw);
+    let (nbx, nr) = (ul(nbx_raw), ul(nr_raw));
     let constant_jacobians = l.constant_residual_jacobians;
     let model_name = &l.name;
     let solver_doc = doc_lines(&format!(
@@ -795,6 +813,12 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
         /// Condensing storage of the QP solver: `N` (QPs with control bounds only are
         /// condensed) or `0` (Riccati recursion only).
         pub const NC: usize = #nc;
+        /// State-bound rows of the QP solver per stage: the states with a bound.
+        pub const NBX: usize = #nbx;
+        /// Riccati storage of the QP solver: `N`, or `0` for a solver that condenses every
+        /// QP (`NC = N`, no state bounds, no general constraints), which then has no Riccati
+        /// recursion (and ignores a `QpMethod::Riccati` setting).
+        pub const NR: usize = #nr;
         /// Interval length in seconds.
         pub const DT: Real = #dt;
 
@@ -952,7 +976,8 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
         }
 
         /// The runtime solver this crate instantiates.
-        pub type Rti = mpc_runtime::Rti<Real, Model, NX, NU, NP, NY, NYN, NG, NGN, N, NC>;
+        pub type Rti =
+            mpc_runtime::Rti<Real, Model, NX, NU, NP, NY, NYN, NG, NGN, N, NC, NBX, NR>;
 
         const P_ZERO: SVector<Real, NP> =
             SVector::from_array_storage(mpc_runtime::nalgebra::ArrayStorage([[0.0; NP]]));

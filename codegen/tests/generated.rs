@@ -130,29 +130,35 @@ fn lib_rs(g: &GeneratedCrate) -> &str {
 /// Condensing storage (`NC`) and the method setting follow `QpOptions::method` and the model:
 /// `Auto` gives QR-bench A (N = 10, control bounds only) the storage and B (N = 20, where the
 /// dense factorization would cost more) none, and the point-mass model (state bounds) none;
-/// `Condensed` forces it, `Riccati` removes it.
+/// `Condensed` forces it, `Riccati` removes it. The state-bound rows (`NBX`) are the states
+/// with a bound in the model file (the point mass bounds its 3 accelerations), and a solver
+/// that condenses and has nothing but control bounds has no Riccati storage (`NR = 0`); the
+/// probe model's general constraints (its soft floor) keep it (`NR = N`) even condensed.
 #[test]
 fn condensing_storage_follows_the_method_and_the_model() {
+    let rates = "models/quadrotor_rates.mpc";
+    let (condensed, riccati) = (Some(QpMethod::Condensed), Some(QpMethod::Riccati));
     let cases = [
-        ("models/quadrotor_rates.mpc", Some("A"), None, "10", None),
-        ("models/quadrotor_rates.mpc", None, None, "0", None),
-        ("models/paper_pointmass.mpc", None, None, "0", None),
+        (rates, Some("A"), None, ["10", "0", "0"], None),
+        (rates, None, None, ["0", "0", "20"], None),
         (
-            "models/quadrotor_rates.mpc",
+            "models/paper_pointmass.mpc",
             None,
-            Some(QpMethod::Condensed),
-            "20",
+            None,
+            ["0", "3", "10"],
+            None,
+        ),
+        (rates, None, condensed, ["20", "0", "0"], Some("Condensed")),
+        (rates, Some("A"), riccati, ["0", "0", "10"], Some("Riccati")),
+        (
+            "models/quadrotor_probe.mpc",
+            None,
+            condensed,
+            ["20", "0", "20"],
             Some("Condensed"),
         ),
-        (
-            "models/quadrotor_rates.mpc",
-            Some("A"),
-            Some(QpMethod::Riccati),
-            "0",
-            Some("Riccati"),
-        ),
     ];
-    for (file, variant, method, nc, set) in cases {
+    for (file, variant, method, [nc, nbx, nr], set) in cases {
         let opts = Options {
             qp: QpOptions {
                 method,
@@ -163,12 +169,15 @@ fn condensing_storage_follows_the_method_and_the_model() {
         let g = regenerate(file, variant, &opts);
         let lib = lib_rs(&g);
         let what = format!("{file} {variant:?} {method:?}");
+        for (name, value) in [("NC", nc), ("NBX", nbx), ("NR", nr)] {
+            assert!(
+                lib.contains(&format!("pub const {name}: usize = {value};")),
+                "{what}: {name} = {value}"
+            );
+        }
+        let flat: String = lib.split_whitespace().collect();
         assert!(
-            lib.contains(&format!("pub const NC: usize = {nc};")),
-            "{what}"
-        );
-        assert!(
-            lib.contains("Rti<Real, Model, NX, NU, NP, NY, NYN, NG, NGN, N, NC>"),
+            flat.contains("Rti<Real,Model,NX,NU,NP,NY,NYN,NG,NGN,N,NC,NBX,NR,>"),
             "{what}"
         );
         let line = |m: &str| format!("s.qp.method = mpc_runtime::QpMethod::{m};");

@@ -4,7 +4,9 @@
 //!
 //! `cargo run -p mpc-runtime --example workspace_sizes`
 //!
-//! The sizes are those of the host (`usize` fields are 8 bytes here, 4 on a Cortex-M).
+//! The sizes are those of the host (`usize` fields are 8 bytes here, 4 on a Cortex-M). The
+//! generated solver of the firmware (`generated/quadrotor_rates_f32`) condenses (`NC = N`)
+//! and has no state-bound rows (`NBX = 0`) and no Riccati storage (`NR = 0`).
 
 use core::mem::size_of;
 
@@ -20,20 +22,28 @@ const N: usize = 10;
 
 fn main() {
     let qp = size_of::<OcpQp<T, NX, NU, 0, 0, N>>();
-    let riccati_only = size_of::<QpSolver<T, NX, NU, 0, 0, N, 0>>();
-    let with_condensing = size_of::<QpSolver<T, NX, NU, 0, 0, N, N>>();
+    let full = size_of::<QpSolver<T, NX, NU, 0, 0, N, 0>>();
+    let no_state_rows = size_of::<QpSolver<T, NX, NU, 0, 0, N, 0, 0>>();
+    let firmware = size_of::<QpSolver<T, NX, NU, 0, 0, N, N, 0, 0>>();
+    let condensing = size_of::<QpSolver<T, NX, NU, 0, 0, N, N>>() - full;
     // The model is a unit struct in generated code; `()` has its size.
-    let rti = size_of::<Rti<T, (), NX, NU, NP, NY, NYN, 0, 0, N, N>>();
+    let rti = size_of::<Rti<T, (), NX, NU, NP, NY, NYN, 0, 0, N, N, 0, 0>>();
     println!("f32, NX = {NX}, NU = {NU}, N = {N} (bytes)");
-    println!("OCP-QP data (stages and terminal)    {qp:>7}");
-    println!("QP solver without condensing storage {riccati_only:>7}");
+    println!("OCP-QP data (stages and terminal)        {qp:>7}");
+    println!("QP solver, NC = 0, NBX = NX, NR = N      {full:>7}");
     println!(
-        "condensing storage                   {:>7}",
-        with_condensing - riccati_only
+        "  of which state-bound rows             {:>7}",
+        full - no_state_rows
     );
     println!(
-        "RTI trajectories, references, weights {:>6}",
-        rti - qp - with_condensing
+        "  of which Riccati storage              {:>7}",
+        no_state_rows - (firmware - condensing)
     );
-    println!("RTI solver in total (NC = N)         {rti:>7}");
+    println!("condensing storage (NC = N)              {condensing:>7}");
+    println!("QP solver, NC = N, NBX = 0, NR = 0       {firmware:>7}");
+    println!(
+        "RTI trajectories, references, weights    {:>7}",
+        rti - qp - firmware
+    );
+    println!("RTI solver in total (NC = N, NBX = 0, NR = 0) {rti:>7}");
 }

@@ -40,7 +40,7 @@ use crate::kernels::{
     sub_mul_tr_sum, symmetrize, tr_mul,
 };
 use crate::real::Real;
-use crate::rows::{BoundError, Rhs, Rows, Soft};
+use crate::rows::{BoundError, Rhs, Rows, Soft, SubRows};
 
 mod condense;
 mod polish;
@@ -365,6 +365,9 @@ pub enum QpStatus {
     NonFiniteInput = 3,
     /// The Newton system could not be factorized even with increased regularization.
     NumericalError = 4,
+    /// A stage bounds more states than the solver has state-bound rows (`NBX` of
+    /// [`QpSolver`]).
+    TooManyStateBounds = 5,
 }
 
 /// Status and residuals of the last solve.
@@ -417,6 +420,13 @@ impl<T: Real, const NX: usize, const NU: usize, const N: usize> QpSolution<T, NX
 }
 
 /// Interior-point and Riccati workspace for one QP size. Holds everything; never allocates.
+///
+/// The sizes beyond the QP's: `NC` is `0` (no condensing storage) or `N` (see [`QpMethod`]);
+/// `NBX <= NX` is the number of state-bound rows per stage, taken by the states with a finite
+/// bound in order (a stage bounding more is refused with
+/// [`QpStatus::TooManyStateBounds`]); `NR` is `N`, or `0` for a solver without the Riccati
+/// recursion's storage, which condenses every QP and needs `NC = N`, `NBX = 0` and no general
+/// constraints. Other values fail to compile.
 #[derive(Clone, Debug)]
 pub struct QpSolver<
     T: Real,
@@ -426,48 +436,50 @@ pub struct QpSolver<
     const NGN: usize,
     const N: usize,
     const NC: usize = 0,
+    const NBX: usize = NX,
+    const NR: usize = N,
 > {
     /// Settings used by [`solve`](Self::solve).
     pub settings: QpSettings<T>,
     sol: QpSolution<T, NX, NU, N>,
-    rx: [Rows<T, NX>; N],
+    rx: [SubRows<T, NX, NBX>; N],
     ru: [Rows<T, NU>; N],
     rg: [Rows<T, NG>; N],
-    rxn: Rows<T, NX>,
+    rxn: SubRows<T, NX, NBX>,
     rgn: Rows<T, NGN>,
     /// Slacks of the soft general-constraint rows.
     sg: [Soft<T, NG>; N],
     sgn: Soft<T, NGN>,
     /// Dynamics residuals `A x + B u + f - x_next`.
-    rb: [Vect<T, NX>; N],
+    rb: [Vect<T, NX>; NR],
     /// The soft rows' stationarity residual and the largest of its terms.
     soft_stat: [T; 2],
     /// `H y + g` per stage (without the inequality terms).
-    hx: [Vect<T, NX>; N],
+    hx: [Vect<T, NX>; NR],
     hu: [Vect<T, NU>; N],
     hxn: Vect<T, NX>,
     /// Riccati: `P_{k+1}`, `p_{k+1}`, `L^-1` for the Cholesky factor `L` of `R~ = R + B'PB`,
     /// `W' = S~'L^-T` for `S~ = S + B'PA`, and the feedforward term `y` (see [`lq_solve`]).
-    pn: [Mat<T, NX, NX>; N],
-    pvn: [Vect<T, NX>; N],
-    linv: [Mat<T, NU, NU>; N],
-    wt: [Mat<T, NX, NU>; N],
-    kv: [Vect<T, NU>; N],
+    pn: [Mat<T, NX, NX>; NR],
+    pvn: [Vect<T, NX>; NR],
+    linv: [Mat<T, NU, NU>; NR],
+    wt: [Mat<T, NX, NU>; NR],
+    kv: [Vect<T, NU>; NR],
     /// Right-hand side of the linear-quadratic subproblem: reduced gradients and dynamics
     /// residuals.
-    gxt: [Vect<T, NX>; N],
+    gxt: [Vect<T, NX>; NR],
     gut: [Vect<T, NU>; N],
     gnt: Vect<T, NX>,
-    rbt: [Vect<T, NX>; N],
+    rbt: [Vect<T, NX>; NR],
     /// The same right-hand side as first built (iterative refinement overwrites the above).
-    gx0: [Vect<T, NX>; N],
+    gx0: [Vect<T, NX>; NR],
     gu0: [Vect<T, NU>; N],
     gn0: Vect<T, NX>,
     /// Newton direction and new dynamics multipliers.
-    dx: [Vect<T, NX>; N],
+    dx: [Vect<T, NX>; NR],
     dxn: Vect<T, NX>,
     du: [Vect<T, NU>; N],
-    pi_new: [Vect<T, NX>; N],
+    pi_new: [Vect<T, NX>; NR],
     last_alpha: T,
     /// The multipliers of the last solve are a solution's (usable for a dual warm start).
     dual_valid: bool,
@@ -494,7 +506,9 @@ impl<
     const NGN: usize,
     const N: usize,
     const NC: usize,
-> Default for QpSolver<T, NX, NU, NG, NGN, N, NC>
+    const NBX: usize,
+    const NR: usize,
+> Default for QpSolver<T, NX, NU, NG, NGN, N, NC, NBX, NR>
 {
     fn default() -> Self {
         Self::NEW
@@ -564,45 +578,52 @@ impl<
     const NGN: usize,
     const N: usize,
     const NC: usize,
-> QpSolver<T, NX, NU, NG, NGN, N, NC>
+    const NBX: usize,
+    const NR: usize,
+> QpSolver<T, NX, NU, NG, NGN, N, NC, NBX, NR>
 {
-    /// A solver with default settings; usable in a `static`. `NC` is `0` (no storage for
-    /// condensing) or `N`; any other value fails to compile.
+    /// A solver with default settings; usable in a `static`. `NC`, `NBX` and `NR` as in the
+    /// type's docs; other values fail to compile.
     pub const NEW: Self = QpSolver {
         settings: QpSettings::DEFAULT,
         sol: QpSolution::NEW,
-        rx: [Rows::NEW; N],
+        rx: [SubRows::NEW; N],
         ru: [Rows::NEW; N],
         rg: [Rows::NEW; N],
-        rxn: Rows::NEW,
+        rxn: SubRows::NEW,
         rgn: Rows::NEW,
         sg: [Soft::NEW; N],
         sgn: Soft::NEW,
-        rb: [crate::zeros(); N],
+        rb: [crate::zeros(); NR],
         soft_stat: [T::ZERO; 2],
-        hx: [crate::zeros(); N],
+        hx: [crate::zeros(); NR],
         hu: [crate::zeros(); N],
         hxn: crate::zeros(),
-        pn: [crate::zeros(); N],
-        pvn: [crate::zeros(); N],
-        linv: [crate::zeros(); N],
-        wt: [crate::zeros(); N],
-        kv: [crate::zeros(); N],
-        gxt: [crate::zeros(); N],
+        pn: [crate::zeros(); NR],
+        pvn: [crate::zeros(); NR],
+        linv: [crate::zeros(); NR],
+        wt: [crate::zeros(); NR],
+        kv: [crate::zeros(); NR],
+        gxt: [crate::zeros(); NR],
         gut: [crate::zeros(); N],
         gnt: crate::zeros(),
-        rbt: [crate::zeros(); N],
-        gx0: [crate::zeros(); N],
+        rbt: [crate::zeros(); NR],
+        gx0: [crate::zeros(); NR],
         gu0: [crate::zeros(); N],
         gn0: crate::zeros(),
-        dx: [crate::zeros(); N],
+        dx: [crate::zeros(); NR],
         dxn: crate::zeros(),
         du: [crate::zeros(); N],
-        pi_new: [crate::zeros(); N],
+        pi_new: [crate::zeros(); NR],
         last_alpha: T::ZERO,
         dual_valid: false,
         condensed: {
             assert!(NC == 0 || NC == N, "NC must be 0 or N");
+            assert!(NR == 0 || NR == N, "NR must be 0 or N");
+            assert!(
+                NR == N || (NC == N && NBX == 0 && NG == 0 && NGN == 0),
+                "NR = 0 (no Riccati storage) needs NC = N, NBX = 0 and no general constraints"
+            );
             false
         },
         polished: false,
@@ -624,6 +645,13 @@ impl<
     /// Whether the last [`prepare`](Self::prepare) condensed the QP (see [`QpMethod`]).
     pub fn condensed(&self) -> bool {
         self.condensed
+    }
+
+    /// Whether the iteration works on the condensed QP: always without Riccati storage
+    /// (`NR = 0`; the QP is condensed before the iteration starts), which leaves the Riccati
+    /// recursion out of such a build.
+    fn dense(&self) -> bool {
+        NR != N || self.condensed
     }
 
     /// Step length of the last interior-point iteration.
@@ -803,11 +831,23 @@ impl<
             if !self.check_input(qp) {
                 return self.info(QpStatus::NonFiniteInput, 0, [nan; 4]);
             }
-            if self.load_bounds(qp).is_err() {
-                return self.info(QpStatus::Infeasible, 0, [nan; 4]);
+            match self.load_bounds(qp) {
+                Ok(()) => {}
+                Err(BoundError::TooMany) => {
+                    return self.info(QpStatus::TooManyStateBounds, 0, [nan; 4]);
+                }
+                Err(_) => return self.info(QpStatus::Infeasible, 0, [nan; 4]),
+            }
+            // Without Riccati storage every QP is condensed (the solver's dimensions allow
+            // no other inequality than control bounds): this one had no `prepare`.
+            if NR != N {
+                self.condensed = self.condense(qp);
+                if !self.condensed {
+                    return self.info(QpStatus::NumericalError, 0, [nan; 4]);
+                }
             }
         }
-        let m = self.rx.iter().map(Rows::count).sum::<usize>()
+        let m = self.rx.iter().map(|r| r.count()).sum::<usize>()
             + self.ru.iter().map(Rows::count).sum::<usize>()
             + self.rg.iter().map(Rows::count).sum::<usize>()
             + self.sg.iter().map(Soft::count).sum::<usize>()
@@ -859,7 +899,7 @@ impl<
             self.sgn.init(&mut self.rgn, &gn, floor, mu0);
         }
         self.dual_valid = false;
-        if self.condensed {
+        if self.dense() {
             self.condensed_gradient(qp);
         }
 
@@ -879,7 +919,7 @@ impl<
             res = self.residuals(qp);
             let mu = res[3] / m_real;
             res[3] = mu;
-            if !self.condensed {
+            if !self.dense() {
                 let others = res[1] <= st.tol_eq && res[2] <= st.tol_ineq && mu <= st.tol_comp;
                 res[0] = if iter == 0 || others {
                     self.stationarity(qp)
@@ -931,7 +971,7 @@ impl<
             // complementarity back while Newton steps remove it (one more iteration per QP
             // on QR-bench); with control bounds alone the Newton systems stay well
             // conditioned near the boundary (the random QPs against clarabel).
-            let stat_floor = if self.condensed {
+            let stat_floor = if self.dense() {
                 T::ZERO
             } else {
                 res[0] * T::lit(MU_PER_STATIONARITY)
@@ -971,14 +1011,14 @@ impl<
     /// `res` from [`residuals`](Self::residuals) with the stationarity residual computed
     /// (the condensed QP's is part of them).
     fn exact(&self, qp: &OcpQp<T, NX, NU, NG, NGN, N>, mut res: [T; 4]) -> [T; 4] {
-        if !self.condensed {
+        if !self.dense() {
             res[0] = self.stationarity(qp);
         }
         res
     }
 
     fn max_multiplier(&self) -> T {
-        if self.condensed {
+        if self.dense() {
             return self
                 .ru
                 .iter()
@@ -1005,7 +1045,7 @@ impl<
     /// Soft rows' slacks enter the inequality residual and `s m` the complementarity. The
     /// dynamics and inequality residuals are absolute.
     fn residuals(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N>) -> [T; 4] {
-        if self.condensed {
+        if self.dense() {
             return self.condensed_residuals();
         }
         let (mut re, mut ri, mut comp) = (T::ZERO, T::ZERO, T::ZERO);
@@ -1023,7 +1063,7 @@ impl<
             self.hx[k] = mul(&s.q, &x) + tr_mul(&s.s, &u) + s.gx;
             self.hu[k] = mul(&s.r, &u) + mul(&s.s, &x) + s.gu;
             ri = ri
-                .max(self.rx[k].residuals(&x, None))
+                .max(self.rx[k].residuals(&x))
                 .max(self.ru[k].residuals(&u, None));
             comp += self.rx[k].complementarity() + self.ru[k].complementarity();
             if NG > 0 {
@@ -1037,7 +1077,7 @@ impl<
         let t = &qp.terminal;
         let xn = self.sol.xn;
         self.hxn = mul(&t.q, &xn) + t.gx;
-        ri = ri.max(self.rxn.residuals(&xn, None));
+        ri = ri.max(self.rxn.residuals(&xn));
         comp += self.rxn.complementarity();
         if NGN > 0 {
             ri = ri.max(self.rgn.residuals(&mul(&t.c, &xn), Some(&self.sgn)));
@@ -1103,12 +1143,12 @@ impl<
     fn factorize(
         &mut self,
         qp: &OcpQp<T, NX, NU, NG, NGN, N>,
-        active: Option<&ActiveSet<T, NX, NU, NG, NGN, N>>,
+        active: Option<&ActiveSet<T, NBX, NU, NG, NGN, N>>,
     ) -> bool {
         if N == 0 {
             return true;
         }
-        if self.condensed {
+        if self.dense() {
             return self.condensed_factorize();
         }
         let t = &qp.terminal;
@@ -1119,7 +1159,9 @@ impl<
         *last = t.q;
         add_diagonal(
             last,
-            &weights(&self.rxn, None, active.map(|a| (&a.xn, a.w))),
+            &self
+                .rxn
+                .scatter(&weights(&self.rxn, None, active.map(|a| (&a.xn, a.w)))),
         );
         if NGN > 0 {
             let sg = weights(&self.rgn, Some(&self.sgn), active.map(|a| (&a.gn, a.w)));
@@ -1184,7 +1226,11 @@ impl<
                 *pk = s.q;
                 add_diagonal(
                     pk,
-                    &weights(&self.rx[k], None, active.map(|a| (&a.x[k], a.w))),
+                    &self.rx[k].scatter(&weights(
+                        &self.rx[k],
+                        None,
+                        active.map(|a| (&a.x[k], a.w)),
+                    )),
                 );
                 if let Some(cts) = cts {
                     mul_sparse_add_into(pk, &cts, &s.c);
@@ -1204,19 +1250,19 @@ impl<
         if N == 0 {
             return;
         }
-        if self.condensed {
+        if self.dense() {
             self.condensed_direction(rhs);
             return;
         }
         let t = &qp.terminal;
         self.gnt = self.hxn
-            + self.rxn.gradient(rhs, None)
+            + self.rxn.gradient(rhs)
             + tr_mul(&t.c, &self.rgn.gradient(rhs, Some(&self.sgn)));
         for k in 0..N {
             let s = &qp.stages[k];
             let wg = self.rg[k].gradient(rhs, Some(&self.sg[k]));
             self.gut[k] = self.hu[k] + self.ru[k].gradient(rhs, None) + tr_mul(&s.d, &wg);
-            self.gxt[k] = self.hx[k] + self.rx[k].gradient(rhs, None) + tr_mul(&s.c, &wg);
+            self.gxt[k] = self.hx[k] + self.rx[k].gradient(rhs) + tr_mul(&s.c, &wg);
             self.rbt[k] = self.rb[k];
         }
         self.gx0 = self.gxt;
@@ -1229,12 +1275,12 @@ impl<
         for k in 0..N {
             let s = &qp.stages[k];
             let (dx, du) = (self.dx[k], self.du[k]);
-            self.rx[k].direction(&dx, rhs, None);
+            self.rx[k].direction(&dx, rhs);
             self.ru[k].direction(&du, rhs, None);
             self.rg[k].direction(&(s.c * dx + s.d * du), rhs, Some(&mut self.sg[k]));
         }
         let dxn = self.dxn;
-        self.rxn.direction(&dxn, rhs, None);
+        self.rxn.direction(&dxn, rhs);
         self.rgn.direction(&(t.c * dxn), rhs, Some(&mut self.sgn));
     }
 
@@ -1293,7 +1339,7 @@ impl<
             if k > 0 {
                 self.gxt[k] = s.q * dx
                     + tr_mul(&s.s, &du)
-                    + self.rx[k].sigma(None).component_mul(&dx)
+                    + self.rx[k].sigma().component_mul(&dx)
                     + tr_mul(&s.c, &wg)
                     + self.gx0[k]
                     + tr_mul(&s.a, &pi0[k])
@@ -1303,7 +1349,7 @@ impl<
         }
         let wgn = self.rgn.sigma(Some(&self.sgn)).component_mul(&(t.c * dxn0));
         self.gnt =
-            t.q * dxn0 + self.rxn.sigma(None).component_mul(&dxn0) + tr_mul(&t.c, &wgn) + self.gn0
+            t.q * dxn0 + self.rxn.sigma().component_mul(&dxn0) + tr_mul(&t.c, &wgn) + self.gn0
                 - pi0[N - 1];
         self.lq_solve(qp);
         for k in 0..N {
@@ -1315,7 +1361,7 @@ impl<
     }
 
     fn save_affine(&mut self) {
-        if self.condensed {
+        if self.dense() {
             self.ru.iter_mut().for_each(Rows::save_affine);
             return;
         }
@@ -1331,7 +1377,7 @@ impl<
     }
 
     fn max_step(&self, mut alpha: T) -> T {
-        if self.condensed {
+        if self.dense() {
             return self.ru.iter().fold(alpha, |a, r| r.max_step(a));
         }
         for k in 0..N {
@@ -1346,7 +1392,7 @@ impl<
     }
 
     fn complementarity_after(&self, alpha: T) -> T {
-        if self.condensed {
+        if self.dense() {
             return self
                 .ru
                 .iter()
@@ -1365,7 +1411,7 @@ impl<
     }
 
     fn take_step(&mut self, alpha: T) {
-        if self.condensed {
+        if self.dense() {
             // Only the controls and their bounds: states and dynamics multipliers follow
             // from them at the end (`expand`).
             for k in 0..N {

@@ -54,6 +54,8 @@ pub(crate) struct Rows<T: Real, const K: usize> {
 pub(crate) enum BoundError {
     NotANumber,
     Crossed,
+    /// More entries with a bound than [`SubRows`] has slots.
+    TooMany,
 }
 
 impl<T: Real, const K: usize> Rows<T, K> {
@@ -524,6 +526,175 @@ impl<T: Real, const K: usize> Rows<T, K> {
             m = m.max(self.ll[i]).max(self.lu[i]);
         }
         m
+    }
+}
+
+/// Bound rows on some entries of an `NV`-vector (a stage's state, whose bounds come as
+/// `NV`-vectors with infinite entries where there is none): slot `j < K` bounds entry
+/// `idx[j]`. With `K = NV` slot `j` is entry `j`. With fewer slots, the entries with a
+/// finite bound take the first `len` slots, in order, and the other slots have no side. The
+/// [`Rows`] methods on values and directions take and give `NV`-vectors here; the others,
+/// and the fields, are the slots' ([`Deref`](core::ops::Deref)).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct SubRows<T: Real, const NV: usize, const K: usize> {
+    rows: Rows<T, K>,
+    idx: [u8; K],
+    /// Slots in use (with `K < NV`, which is then at most 256).
+    len: u8,
+}
+
+impl<T: Real, const NV: usize, const K: usize> core::ops::Deref for SubRows<T, NV, K> {
+    type Target = Rows<T, K>;
+    fn deref(&self) -> &Rows<T, K> {
+        &self.rows
+    }
+}
+
+impl<T: Real, const NV: usize, const K: usize> core::ops::DerefMut for SubRows<T, NV, K> {
+    fn deref_mut(&mut self) -> &mut Rows<T, K> {
+        &mut self.rows
+    }
+}
+
+impl<T: Real, const NV: usize, const K: usize> SubRows<T, NV, K> {
+    /// No bounds. `K` is at most `NV`, and an `NV` above 256 needs `K = NV` (slots are
+    /// numbered in bytes); anything else fails to compile.
+    pub const NEW: Self = {
+        assert!(K <= NV, "NBX must not exceed NX");
+        assert!(K == NV || NV <= 256, "NBX < NX needs NX <= 256");
+        SubRows {
+            rows: Rows::NEW,
+            idx: [0; K],
+            len: 0,
+        }
+    };
+
+    /// Copies the bounds of the entries in; `active = false` disables every row. An entry
+    /// has a row if either bound is finite.
+    pub fn set_bounds(
+        &mut self,
+        lo: &SVector<T, NV>,
+        hi: &SVector<T, NV>,
+        active: bool,
+    ) -> Result<(), BoundError> {
+        if K == NV {
+            return self
+                .rows
+                .set_bounds(&self.gather(lo), &self.gather(hi), active);
+        }
+        let mut sl = SVector::<T, K>::repeat(-T::INF);
+        let mut sh = SVector::<T, K>::repeat(T::INF);
+        let (mut idx, mut len) = ([0u8; K], 0usize);
+        for i in 0..NV {
+            let (l, h) = (lo[i], hi[i]);
+            if l.nan() || h.nan() {
+                return Err(BoundError::NotANumber);
+            }
+            if active && (l > -T::INF || h < T::INF) {
+                let (Some(slot), Ok(i8)) = (idx.get_mut(len), u8::try_from(i)) else {
+                    return Err(BoundError::TooMany);
+                };
+                *slot = i8;
+                (sl[len], sh[len]) = (l, h);
+                len += 1;
+            }
+        }
+        self.rows.set_bounds(&sl, &sh, true)?;
+        // `len <= K < NV <= 256` here: it fits.
+        (self.idx, self.len) = (idx, u8::try_from(len).unwrap_or(u8::MAX));
+        Ok(())
+    }
+
+    /// The entry of each slot in use (with `K < NV`).
+    fn slots(&self) -> impl Iterator<Item = (usize, usize)> + '_ {
+        self.idx
+            .iter()
+            .take(usize::from(self.len))
+            .enumerate()
+            .map(|(j, &i)| (j, usize::from(i)))
+    }
+
+    /// The slots' values of `v` (zero in the slots not in use).
+    pub fn gather(&self, v: &SVector<T, NV>) -> SVector<T, K> {
+        if K == NV {
+            return SVector::from_fn(|j, _| v[j]);
+        }
+        let mut s = SVector::<T, K>::zeros();
+        for (j, i) in self.slots() {
+            s[j] = v[i];
+        }
+        s
+    }
+
+    /// The `NV`-vector with the slots' values `w` on their entries, zero elsewhere.
+    pub fn scatter(&self, w: &SVector<T, K>) -> SVector<T, NV> {
+        if K == NV {
+            return SVector::from_fn(|i, _| w[i]);
+        }
+        let mut v = SVector::<T, NV>::zeros();
+        for (j, i) in self.slots() {
+            v[i] = w[j];
+        }
+        v
+    }
+
+    /// [`Rows::init`] for entry values `v`.
+    pub fn init(&mut self, v: &SVector<T, NV>, floor: T, mu0: T) {
+        let s = self.gather(v);
+        self.rows.init(&s, floor, mu0);
+    }
+
+    /// [`Rows::warm_init`] for entry values `v`.
+    pub fn warm_init(&mut self, v: &SVector<T, NV>, t_floor: T, lam_floor: T) {
+        let s = self.gather(v);
+        self.rows.warm_init(&s, t_floor, lam_floor);
+    }
+
+    /// [`Rows::residuals`] for entry values `v`.
+    pub fn residuals(&mut self, v: &SVector<T, NV>) -> T {
+        if !self.rows.any {
+            return T::ZERO;
+        }
+        let s = self.gather(v);
+        self.rows.residuals(&s, None)
+    }
+
+    /// [`Rows::dual`] of the slots.
+    pub fn rows_dual(&self) -> SVector<T, K> {
+        self.rows.dual()
+    }
+
+    /// [`Rows::dual`] on the entries.
+    pub fn dual(&self) -> SVector<T, NV> {
+        if !self.rows.any {
+            return SVector::zeros();
+        }
+        self.scatter(&self.rows.dual())
+    }
+
+    /// [`Rows::sigma`] on the entries.
+    pub fn sigma(&self) -> SVector<T, NV> {
+        if !self.rows.any {
+            return SVector::zeros();
+        }
+        self.scatter(&self.rows.sigma(None))
+    }
+
+    /// [`Rows::gradient`] on the entries.
+    pub fn gradient(&self, rhs: Rhs<T>) -> SVector<T, NV> {
+        if !self.rows.any {
+            return SVector::zeros();
+        }
+        self.scatter(&self.rows.gradient(rhs, None))
+    }
+
+    /// [`Rows::direction`] for a change `dv` of the entries.
+    pub fn direction(&mut self, dv: &SVector<T, NV>, rhs: Rhs<T>) {
+        if !self.rows.any {
+            return;
+        }
+        let s = self.gather(dv);
+        self.rows.direction(&s, rhs, None);
     }
 }
 

@@ -124,9 +124,12 @@ pub enum SetError {
     CrossedBounds,
     /// A soft-constraint penalty is negative.
     NegativePenalty,
+    /// More states have a bound than the solver has state-bound rows (its `NBX`).
+    TooManyStateBounds,
 }
 
-/// A real-time-iteration NMPC solver for model `M` with horizon `N`.
+/// A real-time-iteration NMPC solver for model `M` with horizon `N`; `NC`, `NBX` and `NR`
+/// size its QP solver ([`QpSolver`]).
 #[derive(Clone, Debug)]
 pub struct Rti<
     T: Real,
@@ -140,13 +143,15 @@ pub struct Rti<
     const NGN: usize,
     const N: usize,
     const NC: usize = 0,
+    const NBX: usize = NX,
+    const NR: usize = N,
 > {
     /// The model.
     pub model: M,
     /// Settings.
     pub settings: RtiSettings<T>,
     qp: OcpQp<T, NX, NU, NG, NGN, N>,
-    solver: QpSolver<T, NX, NU, NG, NGN, N, NC>,
+    solver: QpSolver<T, NX, NU, NG, NGN, N, NC, NBX, NR>,
     x: [SVector<T, NX>; N],
     xn: SVector<T, NX>,
     u: [SVector<T, NU>; N],
@@ -259,7 +264,9 @@ impl<
     const NGN: usize,
     const N: usize,
     const NC: usize,
-> Rti<T, M, NX, NU, NP, NY, NYN, NG, NGN, N, NC>
+    const NBX: usize,
+    const NR: usize,
+> Rti<T, M, NX, NU, NP, NY, NYN, NG, NGN, N, NC, NBX, NR>
 {
     /// A solver with zero trajectory, parameters, references and weights, no bounds and the
     /// default settings. `const`, so it can initialize a `static`.
@@ -409,10 +416,12 @@ impl<
     }
 
     /// Sets box bounds on the state (stages `1..=N`) and the control (stages `0..N`).
-    /// Bounds at or beyond `Real::INF` in magnitude (or infinite) are absent.
+    /// Bounds at or beyond `Real::INF` in magnitude (or infinite) are absent. At most `NBX`
+    /// states may have a bound (one side or both).
     ///
     /// # Errors
-    /// [`SetError::NonFinite`] for NaN, [`SetError::CrossedBounds`].
+    /// [`SetError::NonFinite`] for NaN, [`SetError::CrossedBounds`],
+    /// [`SetError::TooManyStateBounds`] (checked in that order). Nothing changes on error.
     pub fn set_bounds(
         &mut self,
         lbx: &SVector<T, NX>,
@@ -421,6 +430,14 @@ impl<
         ubu: &SVector<T, NU>,
     ) -> Result<(), SetError> {
         check_bounds(lbx, ubx, lbu, ubu)?;
+        let bounded = lbx
+            .iter()
+            .zip(ubx.iter())
+            .filter(|&(&l, &h)| l > -T::INF || h < T::INF)
+            .count();
+        if bounded > NBX {
+            return Err(SetError::TooManyStateBounds);
+        }
         self.lbx = *lbx;
         self.ubx = *ubx;
         self.lbu = *lbu;

@@ -66,8 +66,10 @@ fn polished_error<
     const NGN: usize,
     const N: usize,
     const NC: usize,
+    const NBX: usize,
+    const NR: usize,
 >(
-    solver: &QpSolver<f64, NX, NU, NG, NGN, N, NC>,
+    solver: &QpSolver<f64, NX, NU, NG, NGN, N, NC, NBX, NR>,
     qp: &OcpQp<f64, NX, NU, NG, NGN, N>,
     reference: &Reference<NX, NU>,
 ) -> Result<f64, TestCaseError> {
@@ -784,4 +786,197 @@ fn state_bounds_removed_and_restored_leave_no_trace() {
         assert_eq!(used.solve(&bounded), first, "seed {seed}");
         assert_eq!(plan(&used), with_bounds, "seed {seed}");
     }
+}
+
+/// States, controls and dynamics multipliers of a solution, to compare bit for bit.
+type Plan<const NX: usize, const NU: usize, const N: usize> = (
+    Vec<SVector<f64, NX>>,
+    [SVector<f64, NU>; N],
+    [SVector<f64, NX>; N],
+);
+
+fn plan_of<const NX: usize, const NU: usize, const N: usize>(
+    sol: &QpSolution<f64, NX, NU, N>,
+) -> Plan<NX, NU, N> {
+    let xs = (0..=N).map(|k| *sol.state(k).unwrap()).collect();
+    (xs, sol.u, sol.pi)
+}
+
+/// [`random_qp`] with state bounds on the states in `keep` only.
+fn state_subset_qp<
+    const NX: usize,
+    const NU: usize,
+    const NG: usize,
+    const NGN: usize,
+    const N: usize,
+>(
+    seed: u64,
+    keep: &[usize],
+) -> OcpQp<f64, NX, NU, NG, NGN, N> {
+    let mut qp = random_qp::<NX, NU, NG, NGN, N>(seed);
+    let bounds = qp
+        .stages
+        .iter_mut()
+        .map(|s| (&mut s.lbx, &mut s.ubx))
+        .chain([(&mut qp.terminal.lbx, &mut qp.terminal.ubx)]);
+    for (lo, hi) in bounds {
+        for i in (0..NX).filter(|i| !keep.contains(i)) {
+            lo[i] = f64::NEG_INFINITY;
+            hi[i] = f64::INFINITY;
+        }
+    }
+    qp
+}
+
+/// State-bound rows for some states only (`NBX = 2` of 6; the bounded states vary from stage
+/// to stage, so the slots map to different states): over 40 draws, every judged one matches
+/// clarabel to 1e-7 (polished too), and the solve is the one of a solver with a row for
+/// every state, bit for bit, status, residuals and iterations included. In most draws a
+/// state bound is active (the solution differs from the QP's without state bounds).
+#[test]
+fn state_bound_slots_match_clarabel_and_the_rows_of_every_state() {
+    const KEEP: [usize; 2] = [1, 4];
+    let (mut judged, mut active) = (0, 0);
+    for seed in 0..40u64 {
+        let qp = state_subset_qp::<6, 2, 1, 1, 12>(seed, &KEEP);
+        let Some(reference) = clarabel_solve(&qp) else {
+            continue;
+        };
+        if reference.strict_complementarity <= 1e-3 {
+            continue;
+        }
+        let mut slots = Box::new(QpSolver::<f64, 6, 2, 1, 1, 12, 0, 2>::NEW);
+        slots.settings.tol_stat = 1e-10;
+        slots.settings.tol_comp = 1e-12;
+        let mut full = Box::new(QpSolver::<f64, 6, 2, 1, 1, 12>::NEW);
+        full.settings = slots.settings;
+        let info = slots.solve(&qp);
+        let err = solved_error(&info, &slots.settings, slots.solution(), &reference).unwrap();
+        assert!(err <= 1e-7, "seed {seed}: differs from clarabel by {err:e}");
+        let err = polished_error(&slots, &qp, &reference).unwrap();
+        assert!(
+            err <= 1e-7,
+            "seed {seed}: polished differs from clarabel by {err:e}"
+        );
+        assert_eq!(full.solve(&qp), info, "seed {seed}");
+        assert_eq!(
+            plan_of(full.solution()),
+            plan_of(slots.solution()),
+            "seed {seed}"
+        );
+        let mut free = qp;
+        for (lo, hi) in free.stages.iter_mut().map(|s| (&mut s.lbx, &mut s.ubx)) {
+            lo.fill(f64::NEG_INFINITY);
+            hi.fill(f64::INFINITY);
+        }
+        free.terminal.lbx.fill(f64::NEG_INFINITY);
+        free.terminal.ubx.fill(f64::INFINITY);
+        let mut unbounded = Box::new(QpSolver::<f64, 6, 2, 1, 1, 12>::NEW);
+        unbounded.settings = slots.settings;
+        unbounded.solve(&free);
+        let dx = plan_of(unbounded.solution())
+            .0
+            .iter()
+            .zip(&plan_of(slots.solution()).0)
+            .fold(0.0f64, |m, (a, b)| m.max((a - b).amax()));
+        judged += 1;
+        active += usize::from(dx > 1e-6);
+    }
+    assert!(judged >= 20, "only {judged} draws judged");
+    assert!(
+        2 * active >= judged,
+        "a state bound active in {active} of {judged} draws"
+    );
+}
+
+/// A stage (or the terminal stage) bounding more states than the solver has rows for is
+/// refused at once with its own status, and leaves no trace: the next QP solves as with a
+/// new solver, bit for bit.
+#[test]
+fn more_bounded_states_than_rows_are_refused_and_leave_no_trace() {
+    type Slots = QpSolver<f64, 6, 2, 1, 1, 12, 0, 2>;
+    let good = state_subset_qp::<6, 2, 1, 1, 12>(7, &[0, 5]);
+    // Three states bounded at stage 4 (states 1 to 3 have no bound in `good`).
+    let mut stage = good;
+    stage.stages[4].lbx[1] = -10.0;
+    stage.stages[4].ubx[2] = 10.0;
+    (stage.stages[4].lbx[3], stage.stages[4].ubx[3]) = (-10.0, 10.0);
+    let mut terminal = good;
+    terminal.terminal.lbx.fill(-10.0);
+    let mut fresh = Box::new(Slots::NEW);
+    let first = fresh.solve(&good);
+    assert_eq!(first.status, QpStatus::Solved, "{first:?}");
+    for bad in [stage, terminal] {
+        let mut solver = Box::new(Slots::NEW);
+        assert_eq!(solver.solve(&good), first);
+        let info = solver.solve(&bad);
+        assert_eq!(info.status, QpStatus::TooManyStateBounds, "{info:?}");
+        assert_eq!(info.iterations, 0);
+        assert_eq!(solver.solve(&good), first);
+        assert_eq!(plan_of(solver.solution()), plan_of(fresh.solution()));
+    }
+    // Stage 0's state bounds are no rows (x0 fixes the state): any number is fine.
+    let mut at_x0 = good;
+    at_x0.stages[0].lbx.fill(-10.0);
+    let mut solver = Box::new(Slots::NEW);
+    assert_eq!(solver.solve(&at_x0), first);
+}
+
+/// Without Riccati storage (`NR = 0`: condensing only, no state bounds, no general rows) a
+/// solver solves every QP condensed, the same as a solver with both, bit for bit: after
+/// `prepare`, without it (`solve_prepared` condenses then), and with the Riccati method
+/// asked for. A QP with state bounds is refused. It is smaller by at least the Riccati
+/// factors and the state rows.
+#[test]
+fn a_solver_without_riccati_storage_condenses_every_qp() {
+    type Dense = QpSolver<f64, 4, 2, 0, 0, 8, 8, 0, 0>;
+    type Both = QpSolver<f64, 4, 2, 0, 0, 8, 8>;
+    for seed in [2u64, 11, 23] {
+        let qp = control_bounded_qp::<4, 2, 8>(seed);
+        let mut both = Box::new(Both::NEW);
+        both.settings.method = QpMethod::Condensed;
+        let reference = both.solve(&qp);
+        assert_eq!(
+            reference.status,
+            QpStatus::Solved,
+            "seed {seed}: {reference:?}"
+        );
+        assert!(both.condensed());
+        let expected = plan_of(both.solution());
+
+        let mut dense = Box::new(Dense::NEW);
+        assert_eq!(dense.solve(&qp), reference, "seed {seed}");
+        assert!(dense.condensed());
+        assert_eq!(plan_of(dense.solution()), expected, "seed {seed}");
+
+        let mut unprepared = Box::new(Dense::NEW);
+        assert_eq!(unprepared.solve_prepared(&qp), reference, "seed {seed}");
+        assert!(unprepared.condensed());
+        assert_eq!(plan_of(unprepared.solution()), expected, "seed {seed}");
+
+        let mut riccati = Box::new(Dense::NEW);
+        riccati.settings.method = QpMethod::Riccati;
+        assert_eq!(riccati.solve(&qp), reference, "seed {seed}");
+        assert!(riccati.condensed());
+
+        let mut bounded = qp;
+        bounded.stages[3].ubx[1] = 100.0;
+        let info = dense.solve(&bounded);
+        assert_eq!(
+            info.status,
+            QpStatus::TooManyStateBounds,
+            "seed {seed}: {info:?}"
+        );
+        assert_eq!(dense.solve(&qp), reference, "seed {seed}");
+        assert_eq!(plan_of(dense.solution()), expected, "seed {seed}");
+    }
+    let f = core::mem::size_of::<f64>();
+    let (nx, nu, n) = (4, 2, 8);
+    let riccati = n * (nx * nx + nx * nu + nu * nu) * f;
+    let rows = (n + 1) * 18 * nx * f;
+    let saved = core::mem::size_of::<Both>() - core::mem::size_of::<Dense>();
+    assert!(
+        saved >= riccati + rows,
+        "{saved} B saved, {riccati} + {rows} expected"
+    );
 }

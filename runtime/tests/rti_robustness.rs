@@ -103,14 +103,21 @@ impl<T: Real> Model<T, 2, 1, 0, 3, 2, 1, 0> for DoubleIntegrator {
     }
 }
 
-/// With storage for condensing; [`di`] sets the method.
-type Di = Rti<f64, DoubleIntegrator, 2, 1, 0, 3, 2, 1, 0, 15, 15>;
+/// With storage for condensing and `NBX` state-bound rows; [`di`] sets the method.
+type DiRows<const NBX: usize> = Rti<f64, DoubleIntegrator, 2, 1, 0, 3, 2, 1, 0, 15, 15, NBX>;
+
+/// A row for each state.
+type Di = DiRows<2>;
 
 /// Both ways of solving the QPs: each test below runs with both.
 const METHODS: [QpMethod; 2] = [QpMethod::Riccati, QpMethod::Condensed];
 
 fn di(method: QpMethod) -> Box<Di> {
-    let mut s = Box::new(Di::new(DoubleIntegrator { dt: 0.1 }));
+    di_rows(method)
+}
+
+fn di_rows<const NBX: usize>(method: QpMethod) -> Box<DiRows<NBX>> {
+    let mut s = Box::new(DiRows::<NBX>::new(DoubleIntegrator { dt: 0.1 }));
     s.settings.qp.method = method;
     let w = SMatrix::<f64, 3, 3>::from_diagonal(&SVector::from([10.0, 1.0, 0.1]));
     s.set_weights(&w, &(SMatrix::identity() * 10.0)).unwrap();
@@ -125,7 +132,7 @@ fn di(method: QpMethod) -> Box<Di> {
     s
 }
 
-fn step(s: &mut Di, x: &SVector<f64, 2>) -> SVector<f64, 2> {
+fn step<const NBX: usize>(s: &mut DiRows<NBX>, x: &SVector<f64, 2>) -> SVector<f64, 2> {
     s.prepare();
     let (u, info) = s.feedback(x);
     assert_eq!(info.status, RtiStatus::Ok);
@@ -188,6 +195,45 @@ fn non_finite_inputs_with(method: QpMethod) {
         assert_eq!(
             x, xd,
             "{method:?} step {k}: the refused inputs changed the closed loop"
+        );
+    }
+}
+
+/// A solver with one state-bound row (`NBX = 1`) refuses bounds on both states and keeps
+/// what it had; with a bound on one state its closed loop is that of a solver with a row
+/// for each state, bit for bit, and the bound is active.
+#[test]
+fn state_bounds_beyond_the_rows_are_refused() {
+    for method in METHODS {
+        let mut one = di_rows::<1>(method);
+        let mut both = di_rows::<2>(method);
+        let (lbu, ubu) = (SVector::from([-1.0]), SVector::from([1.0]));
+        // v >= -0.3 while the double integrator brakes from p = 2 to 0.
+        let (lbx, ubx) = (
+            SVector::from([f64::NEG_INFINITY, -0.3]),
+            SVector::repeat(1e30),
+        );
+        one.set_bounds(&lbx, &ubx, &lbu, &ubu).unwrap();
+        both.set_bounds(&lbx, &ubx, &lbu, &ubu).unwrap();
+        assert_eq!(
+            one.set_bounds(&SVector::from([-5.0, -0.3]), &ubx, &lbu, &ubu),
+            Err(SetError::TooManyStateBounds)
+        );
+        assert_eq!(
+            one.set_bounds(&lbx, &SVector::from([5.0, f64::INFINITY]), &lbu, &ubu),
+            Err(SetError::TooManyStateBounds)
+        );
+        let (mut x1, mut x2) = (SVector::from([2.0, 0.0]), SVector::from([2.0, 0.0]));
+        let mut slowest = 0.0f64;
+        for k in 0..30 {
+            x1 = step(&mut one, &x1);
+            x2 = step(&mut both, &x2);
+            assert_eq!(x1, x2, "{method:?} step {k}");
+            slowest = slowest.min(x1[1]);
+        }
+        assert!(
+            (-0.3 - 1e-6..-0.29).contains(&slowest),
+            "{method:?}: the bound v >= -0.3 was not active (v down to {slowest})"
         );
     }
 }

@@ -46,15 +46,19 @@ impl<
     const NGN: usize,
     const N: usize,
     const NC: usize,
-> QpSolver<T, NX, NU, NG, NGN, N, NC>
+    const NBX: usize,
+    const NR: usize,
+> QpSolver<T, NX, NU, NG, NGN, N, NC, NBX, NR>
 {
-    /// Whether the next solve of `qp` condenses: storage for it (`NC = N`), the method, and
-    /// no inequality other than control bounds.
+    /// Whether the next solve of `qp` condenses: storage for it (`NC = N`), the method (any,
+    /// without Riccati storage), and no inequality other than control bounds.
     pub(super) fn condensing_applies(&self, qp: &OcpQp<T, NX, NU, NG, NGN, N>) -> bool {
         if NC != N || N == 0 {
             return false;
         }
+        // Without Riccati storage (`NR = 0`) there is no other method.
         match self.settings.method {
+            _ if NR != N => {}
             QpMethod::Riccati => return false,
             QpMethod::Condensed => {}
             QpMethod::Auto => {

@@ -60,22 +60,22 @@ pub(super) enum Side {
 /// row in the factorization.
 pub(super) struct ActiveSet<
     T: Real,
-    const NX: usize,
+    const NBX: usize,
     const NU: usize,
     const NG: usize,
     const NGN: usize,
     const N: usize,
 > {
-    pub x: [[Side; NX]; N],
+    pub x: [[Side; NBX]; N],
     pub u: [[Side; NU]; N],
     pub g: [[Side; NG]; N],
-    pub xn: [Side; NX],
+    pub xn: [Side; NBX],
     pub gn: [Side; NGN],
     pub w: T,
 }
 
 /// A row: its row set (stage `k`'s state bounds, control bounds, general rows, or the
-/// terminal ones) and its index.
+/// terminal ones) and its index (a state-bound row's slot).
 #[derive(Clone, Copy, Debug)]
 enum Row {
     X(usize, usize),
@@ -85,11 +85,11 @@ enum Row {
     Gn(usize),
 }
 
-impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usize, const N: usize>
-    ActiveSet<T, NX, NU, NG, NGN, N>
+impl<T: Real, const NBX: usize, const NU: usize, const NG: usize, const NGN: usize, const N: usize>
+    ActiveSet<T, NBX, NU, NG, NGN, N>
 {
     /// Puts `row` on `side`, its multiplier at zero.
-    fn set(&mut self, y: &mut Duals<T, NX, NU, NG, NGN, N>, row: Row, side: Side) {
+    fn set(&mut self, y: &mut Duals<T, NBX, NU, NG, NGN, N>, row: Row, side: Side) {
         let (sides, yv): (Option<&mut Side>, Option<&mut T>) = match row {
             Row::X(k, i) => (
                 self.x.get_mut(k).and_then(|s| s.get_mut(i)),
@@ -159,21 +159,21 @@ fn ratio<T: Real, const K: usize>(
 #[derive(Clone, Copy)]
 struct Duals<
     T: Real,
-    const NX: usize,
+    const NBX: usize,
     const NU: usize,
     const NG: usize,
     const NGN: usize,
     const N: usize,
 > {
-    x: [Vect<T, NX>; N],
+    x: [Vect<T, NBX>; N],
     u: [Vect<T, NU>; N],
     g: [Vect<T, NG>; N],
-    xn: Vect<T, NX>,
+    xn: Vect<T, NBX>,
     gn: Vect<T, NGN>,
 }
 
-impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usize, const N: usize>
-    Duals<T, NX, NU, NG, NGN, N>
+impl<T: Real, const NBX: usize, const NU: usize, const NG: usize, const NGN: usize, const N: usize>
+    Duals<T, NBX, NU, NG, NGN, N>
 {
     const ZERO: Self = Duals {
         x: [crate::zeros(); N],
@@ -315,7 +315,9 @@ impl<
     const NGN: usize,
     const N: usize,
     const NC: usize,
-> QpSolver<T, NX, NU, NG, NGN, N, NC>
+    const NBX: usize,
+    const NR: usize,
+> QpSolver<T, NX, NU, NG, NGN, N, NC, NBX, NR>
 {
     /// The polish of the module docs after a solve by the Riccati recursion; if its result
     /// replaced the solution in `sol`, returns its stationarity (relative) and dynamics
@@ -328,21 +330,21 @@ impl<
         }
         let w = T::ONE / T::EPSILON.sqrt();
         let mut act = ActiveSet {
-            x: [[Side::Free; NX]; N],
+            x: [[Side::Free; NBX]; N],
             u: [[Side::Free; NU]; N],
             g: [[Side::Free; NG]; N],
-            xn: initial_sides(&self.rxn),
+            xn: initial_sides(&*self.rxn),
             gn: initial_sides(&self.rgn),
             w,
         };
         let mut y = Duals::ZERO;
-        y.xn = on(&act.xn, &self.rxn.dual());
+        y.xn = on(&act.xn, &self.rxn.rows_dual());
         y.gn = on(&act.gn, &self.rgn.dual());
         for k in 0..N {
-            act.x[k] = initial_sides(&self.rx[k]);
+            act.x[k] = initial_sides(&*self.rx[k]);
             act.u[k] = initial_sides(&self.ru[k]);
             act.g[k] = initial_sides(&self.rg[k]);
-            y.x[k] = on(&act.x[k], &self.rx[k].dual());
+            y.x[k] = on(&act.x[k], &self.rx[k].rows_dual());
             y.u[k] = on(&act.u[k], &self.ru[k].dual());
             y.g[k] = on(&act.g[k], &self.rg[k].dual());
         }
@@ -404,12 +406,12 @@ impl<
             let s = &qp.stages[k];
             let (x, u) = (self.sol.x[k], self.sol.u[k]);
             m = m
-                .max(violation(&self.rx[k], &x))
+                .max(violation(&self.rx[k], &self.rx[k].gather(&x)))
                 .max(violation(&self.ru[k], &u))
                 .max(violation(&self.rg[k], &(s.c * x + s.d * u)));
         }
         let xn = self.sol.xn;
-        m.max(violation(&self.rxn, &xn))
+        m.max(violation(&self.rxn, &self.rxn.gather(&xn)))
             .max(violation(&self.rgn, &(qp.terminal.c * xn)))
     }
 
@@ -420,7 +422,7 @@ impl<
         &self,
         qp: &OcpQp<T, NX, NU, NG, NGN, N>,
         cur: &QpSolution<T, NX, NU, N>,
-        act: &ActiveSet<T, NX, NU, NG, NGN, N>,
+        act: &ActiveSet<T, NBX, NU, NG, NGN, N>,
         tol: T,
     ) -> (T, Option<(Row, Side)>) {
         let mut best: (T, Option<(Row, Side)>) = (T::ONE, None);
@@ -434,9 +436,11 @@ impl<
         for k in 0..N {
             let s = &qp.stages[k];
             let (x0, u0, x1, u1) = (cur.x[k], cur.u[k], self.sol.x[k], self.sol.u[k]);
-            take(ratio(&self.rx[k], &act.x[k], &x0, &x1, tol), &|i| {
-                Row::X(k, i)
-            });
+            let rx = &self.rx[k];
+            take(
+                ratio(rx, &act.x[k], &rx.gather(&x0), &rx.gather(&x1), tol),
+                &|i| Row::X(k, i),
+            );
             take(ratio(&self.ru[k], &act.u[k], &u0, &u1, tol), &|i| {
                 Row::U(k, i)
             });
@@ -447,7 +451,11 @@ impl<
         }
         let c = &qp.terminal.c;
         let (x0, x1) = (cur.xn, self.sol.xn);
-        take(ratio(&self.rxn, &act.xn, &x0, &x1, tol), &Row::Xn);
+        let rxn = &self.rxn;
+        take(
+            ratio(rxn, &act.xn, &rxn.gather(&x0), &rxn.gather(&x1), tol),
+            &Row::Xn,
+        );
         take(
             ratio(&self.rgn, &act.gn, &(c * x0), &(c * x1), tol),
             &Row::Gn,
@@ -477,8 +485,8 @@ impl<
     fn refine_on(
         &mut self,
         qp: &OcpQp<T, NX, NU, NG, NGN, N>,
-        act: &ActiveSet<T, NX, NU, NG, NGN, N>,
-        y: &mut Duals<T, NX, NU, NG, NGN, N>,
+        act: &ActiveSet<T, NBX, NU, NG, NGN, N>,
+        y: &mut Duals<T, NBX, NU, NG, NGN, N>,
         steps: usize,
     ) {
         let f = T::lit(0.01);
@@ -501,19 +509,19 @@ impl<
     fn active_gap(
         &self,
         qp: &OcpQp<T, NX, NU, NG, NGN, N>,
-        act: &ActiveSet<T, NX, NU, NG, NGN, N>,
+        act: &ActiveSet<T, NBX, NU, NG, NGN, N>,
     ) -> T {
         let mut m = T::ZERO;
         for k in 0..N {
             let s = &qp.stages[k];
             let (x, u) = (self.sol.x[k], self.sol.u[k]);
             m = m
-                .max(gaps(&self.rx[k], &act.x[k], &x).amax())
+                .max(gaps(&self.rx[k], &act.x[k], &self.rx[k].gather(&x)).amax())
                 .max(gaps(&self.ru[k], &act.u[k], &u).amax())
                 .max(gaps(&self.rg[k], &act.g[k], &(s.c * x + s.d * u)).amax());
         }
         let xn = self.sol.xn;
-        m.max(gaps(&self.rxn, &act.xn, &xn).amax())
+        m.max(gaps(&self.rxn, &act.xn, &self.rxn.gather(&xn)).amax())
             .max(gaps(&self.rgn, &act.gn, &(qp.terminal.c * xn)).amax())
     }
 
@@ -523,13 +531,13 @@ impl<
     fn polish_step(
         &mut self,
         qp: &OcpQp<T, NX, NU, NG, NGN, N>,
-        act: &ActiveSet<T, NX, NU, NG, NGN, N>,
-        y: &mut Duals<T, NX, NU, NG, NGN, N>,
+        act: &ActiveSet<T, NBX, NU, NG, NGN, N>,
+        y: &mut Duals<T, NBX, NU, NG, NGN, N>,
     ) {
         let w = act.w;
         // The right-hand side: the stationarity residual H z + g + (dynamics)'pi - a'y plus
         // a' w r_a, and the dynamics residual; the solve gives the corrections of z and pi.
-        let mut wr = Duals::<T, NX, NU, NG, NGN, N>::ZERO;
+        let mut wr = Duals::<T, NBX, NU, NG, NGN, N>::ZERO;
         for k in 0..N {
             let s = &qp.stages[k];
             let (x, u) = (self.sol.x[k], self.sol.u[k]);
@@ -539,7 +547,7 @@ impl<
                 self.sol.xn
             };
             self.rbt[k] = s.a * x + s.b * u + s.f - xnext;
-            wr.x[k] = gaps(&self.rx[k], &act.x[k], &x) * w;
+            wr.x[k] = gaps(&self.rx[k], &act.x[k], &self.rx[k].gather(&x)) * w;
             wr.u[k] = gaps(&self.ru[k], &act.u[k], &u) * w;
             wr.g[k] = gaps(&self.rg[k], &act.g[k], &(s.c * x + s.d * u)) * w;
             let tg = wr.g[k] - y.g[k];
@@ -547,7 +555,9 @@ impl<
             self.gut[k] =
                 s.r * u + s.s * x + s.gu + wr.u[k] - y.u[k] + tr_mul(&s.d, &tg) + tr_mul(&s.b, &pi);
             if k > 0 {
-                self.gxt[k] = s.q * x + tr_mul(&s.s, &u) + s.gx + wr.x[k] - y.x[k]
+                let rx = &self.rx[k];
+                self.gxt[k] = s.q * x + tr_mul(&s.s, &u) + s.gx + rx.scatter(&wr.x[k])
+                    - rx.scatter(&y.x[k])
                     + tr_mul(&s.c, &tg)
                     + tr_mul(&s.a, &pi)
                     - self.sol.pi[k - 1];
@@ -555,11 +565,13 @@ impl<
         }
         let t = &qp.terminal;
         let xn = self.sol.xn;
-        wr.xn = gaps(&self.rxn, &act.xn, &xn) * w;
+        wr.xn = gaps(&self.rxn, &act.xn, &self.rxn.gather(&xn)) * w;
         wr.gn = gaps(&self.rgn, &act.gn, &(t.c * xn)) * w;
         let tg = wr.gn - y.gn;
         let prev = self.sol.pi.last().copied().unwrap_or_else(Vect::zeros);
-        self.gnt = t.q * xn + t.gx + wr.xn - y.xn + tr_mul(&t.c, &tg) - prev;
+        self.gnt = t.q * xn + t.gx + self.rxn.scatter(&wr.xn) - self.rxn.scatter(&y.xn)
+            + tr_mul(&t.c, &tg)
+            - prev;
         self.lq_solve(qp);
         // The corrections, and the active rows' multipliers' dy = -w (r_a + a'dz): from the
         // residual and the correction rather than from the rows at the new point, whose
@@ -571,13 +583,13 @@ impl<
                 self.sol.x[k] += dx;
             }
             self.sol.u[k] += du;
-            y.x[k] -= wr.x[k] + on(&act.x[k], &dx) * w;
+            y.x[k] -= wr.x[k] + on(&act.x[k], &self.rx[k].gather(&dx)) * w;
             y.u[k] -= wr.u[k] + on(&act.u[k], &du) * w;
             y.g[k] -= wr.g[k] + on(&act.g[k], &(s.c * dx + s.d * du)) * w;
         }
         let dxn = self.dxn;
         self.sol.xn += dxn;
-        y.xn -= wr.xn + on(&act.xn, &dxn) * w;
+        y.xn -= wr.xn + on(&act.xn, &self.rxn.gather(&dxn)) * w;
         y.gn -= wr.gn + on(&act.gn, &(t.c * dxn)) * w;
         for (pi, dpi) in self.sol.pi.iter_mut().zip(&self.pi_new) {
             *pi += *dpi;
@@ -588,8 +600,8 @@ impl<
     fn move_rows(
         &self,
         qp: &OcpQp<T, NX, NU, NG, NGN, N>,
-        act: &mut ActiveSet<T, NX, NU, NG, NGN, N>,
-        y: &mut Duals<T, NX, NU, NG, NGN, N>,
+        act: &mut ActiveSet<T, NBX, NU, NG, NGN, N>,
+        y: &mut Duals<T, NBX, NU, NG, NGN, N>,
         tol: T,
         at_least: T,
     ) -> (T, bool) {
@@ -605,7 +617,7 @@ impl<
                 &self.rx[k],
                 &mut act.x[k],
                 &mut y.x[k],
-                &x,
+                &self.rx[k].gather(&x),
                 tol,
                 at_least,
             ));
@@ -632,7 +644,7 @@ impl<
             &self.rxn,
             &mut act.xn,
             &mut y.xn,
-            &xn,
+            &self.rxn.gather(&xn),
             tol,
             at_least,
         ));
@@ -653,7 +665,7 @@ impl<
     fn polish_residuals(
         &self,
         qp: &OcpQp<T, NX, NU, NG, NGN, N>,
-        y: &Duals<T, NX, NU, NG, NGN, N>,
+        y: &Duals<T, NBX, NU, NG, NGN, N>,
     ) -> (T, T) {
         let (mut rs, mut re, mut scale) = (T::ZERO, T::ZERO, T::ONE);
         for k in 0..N {
@@ -677,12 +689,13 @@ impl<
                 let hx = s.q * x + tr_mul(&s.s, &u) + s.gx;
                 let (api, cy) = (tr_mul(&s.a, &pi), tr_mul(&s.c, &y.g[k]));
                 let prev = self.sol.pi[k - 1];
-                rs = rs.max((hx + api - prev - y.x[k] - cy).amax());
+                let yx = self.rx[k].scatter(&y.x[k]);
+                rs = rs.max((hx + api - prev - yx - cy).amax());
                 scale = scale
                     .max(hx.amax())
                     .max(api.amax())
                     .max(prev.amax())
-                    .max(y.x[k].amax())
+                    .max(yx.amax())
                     .max(cy.amax());
             }
         }
@@ -691,11 +704,12 @@ impl<
         let hxn = t.q * xn + t.gx;
         let cy = tr_mul(&t.c, &y.gn);
         let prev = self.sol.pi.last().copied().unwrap_or_else(Vect::zeros);
-        rs = rs.max((hxn - prev - y.xn - cy).amax());
+        let yxn = self.rxn.scatter(&y.xn);
+        rs = rs.max((hxn - prev - yxn - cy).amax());
         scale = scale
             .max(hxn.amax())
             .max(prev.amax())
-            .max(y.xn.amax())
+            .max(yxn.amax())
             .max(cy.amax());
         (rs / scale, re)
     }

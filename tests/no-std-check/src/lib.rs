@@ -66,6 +66,22 @@ pub fn solve_qp_f64(
     s.solve(qp)
 }
 
+/// Solves a QP with state-bound rows for 3 states and a general row (`NBX = 3 < NX`).
+pub fn solve_qp_state_slots_f64(
+    s: &mut QpSolver<f64, 10, 4, 1, 0, 20, 0, 3>,
+    qp: &OcpQp<f64, 10, 4, 1, 0, 20>,
+) -> QpInfo<f64> {
+    s.solve(qp)
+}
+
+/// Solves a QP condensed, without Riccati storage (`NBX = 0`, `NR = 0`).
+pub fn solve_qp_dense_f32(
+    s: &mut QpSolver<f32, 10, 4, 0, 0, 10, 10, 0, 0>,
+    qp: &OcpQp<f32, 10, 4, 0, 0, 10>,
+) -> QpInfo<f32> {
+    s.solve(qp)
+}
+
 /// One RTI step in `f32`.
 pub fn rti_step_f32(
     s: &mut Rti<f32, Linear, 10, 4, 0, 14, 10, 0, 0, 10>,
