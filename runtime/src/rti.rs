@@ -15,7 +15,7 @@
 
 use nalgebra::{SMatrix, SVector};
 
-use crate::kernels::{mul, mul_mostly_zero_into, scaled_transpose};
+use crate::kernels::{mul, mul_mostly_zero_into, scaled_transpose, tr_mul};
 use crate::model::Model;
 use crate::qp::{OcpQp, QpInfo, QpSettings, QpSolver, QpStatus};
 use crate::real::Real;
@@ -220,6 +220,23 @@ fn check_bounds<T: Real, const A: usize, const B: usize>(
         return Err(SetError::CrossedBounds);
     }
     Ok(())
+}
+
+/// `(W J)' = J'W` for a symmetric weight `W` (the solver keeps the symmetric part), diagonal
+/// if `diag`: then a scaling of `J`'s rows. Not inlined: its temporaries stay out of the frame
+/// of [`Rti::linearize`]'s loop, which runs the model's functions (on a Cortex-M4F that frame
+/// was 5.6 KB with them, the deepest of a control step).
+#[inline(never)]
+fn weighted_transpose<T: Real, const R: usize, const C: usize>(
+    w: &SMatrix<T, R, R>,
+    diag: bool,
+    j: &SMatrix<T, R, C>,
+) -> SMatrix<T, C, R> {
+    if diag {
+        scaled_transpose(&w.diagonal(), j)
+    } else {
+        tr_mul(j, w)
+    }
 }
 
 /// Slack cost of constraint values `h` against `lo <= h <= hi` for the soft rows (penalties
@@ -584,12 +601,8 @@ impl<
             // (WJ)' (a diagonal W scales J's rows), then J'WJ as (WJ)'J: the Jacobian on the
             // right, where its zeros are skipped (a residual that selects states and
             // controls is mostly zeros), written into the stage in place.
-            let (wjxt, wjut) = if self.w_diag {
-                let wd = self.w.diagonal();
-                (scaled_transpose(&wd, &jx), scaled_transpose(&wd, &ju))
-            } else {
-                ((self.w * jx).transpose(), (self.w * ju).transpose())
-            };
+            let wjxt = weighted_transpose(&self.w, self.w_diag, &jx);
+            let wjut = weighted_transpose(&self.w, self.w_diag, &ju);
             if gn {
                 mul_mostly_zero_into(&mut s.q, &wjxt, &jx);
                 mul_mostly_zero_into(&mut s.s, &wjut, &jx);
@@ -607,15 +620,19 @@ impl<
             s.soft_l1 = self.l1;
             s.soft_l2 = self.l2;
         }
+        self.linearize_terminal(gn);
+        self.gn_current = true;
+    }
+
+    /// The terminal part of [`linearize`](Self::linearize). Not inlined: its temporaries
+    /// would add to the stack frame of the stages' loop (1.4 KB on a Cortex-M4F).
+    #[inline(never)]
+    fn linearize_terminal(&mut self, gn: bool) {
         let (xn, pn) = (self.xn, self.pn);
         let t = &mut self.qp.terminal;
         let mut jx = SMatrix::<T, NYN, NX>::zeros();
         let r = self.model.terminal_residual(&xn, &pn, &mut jx) - self.yref_n;
-        let wjxt = if self.wn_diag {
-            scaled_transpose(&self.wn.diagonal(), &jx)
-        } else {
-            (self.wn * jx).transpose()
-        };
+        let wjxt = weighted_transpose(&self.wn, self.wn_diag, &jx);
         if gn {
             mul_mostly_zero_into(&mut t.q, &wjxt, &jx);
         }
@@ -627,7 +644,6 @@ impl<
         t.ug = self.ugn - h;
         t.soft_l1 = self.l1n;
         t.soft_l2 = self.l2n;
-        self.gn_current = true;
     }
 
     /// Feedback phase: embeds the measured state, solves the QP prepared by
