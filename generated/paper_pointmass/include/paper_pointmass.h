@@ -91,7 +91,7 @@ typedef struct paper_pointmass_solver paper_pointmass_solver;
 /** Statistics of the last feedback or SQP solve. */
 typedef struct paper_pointmass_stats {
     int status;                /**< PAPER_POINTMASS_STATUS_* of the call. */
-    int qp_status;             /**< Last QP: 0 solved, 1 max iterations, 2 infeasible, 3 non-finite input, 4 numerical error. */
+    int qp_status;             /**< Last QP: 0 solved, 1 max iterations, 2 infeasible, 3 non-finite input, 4 numerical error, 5 too many state bounds. */
     unsigned int qp_iterations;  /**< Interior-point iterations of the last QP. */
     unsigned int sqp_iterations; /**< SQP iterations (1 per real-time iteration). */
     double res_stat;          /**< Stationarity residual of the last QP. */

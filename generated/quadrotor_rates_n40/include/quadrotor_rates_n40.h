@@ -87,7 +87,7 @@ typedef struct quadrotor_rates_n40_solver quadrotor_rates_n40_solver;
 /** Statistics of the last feedback or SQP solve. */
 typedef struct quadrotor_rates_n40_stats {
     int status;                /**< QUADROTOR_RATES_N40_STATUS_* of the call. */
-    int qp_status;             /**< Last QP: 0 solved, 1 max iterations, 2 infeasible, 3 non-finite input, 4 numerical error. */
+    int qp_status;             /**< Last QP: 0 solved, 1 max iterations, 2 infeasible, 3 non-finite input, 4 numerical error, 5 too many state bounds. */
     unsigned int qp_iterations;  /**< Interior-point iterations of the last QP. */
     unsigned int sqp_iterations; /**< SQP iterations (1 per real-time iteration). */
     double res_stat;          /**< Stationarity residual of the last QP. */
