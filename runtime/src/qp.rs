@@ -488,11 +488,10 @@ pub struct QpSolver<
     /// The last solution is the polished one.
     polished: bool,
     /// Condensed Hessian and the Cholesky factor of `H + Sigma`, sharing one array of blocks:
-    /// `H_ij` (`i > j`) at `[j][i]`, above the diagonal, and the factor's `L_ij` at `[i][j]`,
-    /// below it; the diagonal blocks apart (`hd`: `H_ii`, `ld`: `L_ii^-1`). The gradient at
-    /// `x0 = 0` and its derivative by `x0` (`g = gc + xc x0`).
+    /// `H_ij` (`i >= j`) at `[j][i]`, on and above the diagonal, and the factor's `L_ij`
+    /// (`i > j`) at `[i][j]`, below it; the factor's diagonal blocks apart (`ld`: `L_ii^-1`).
+    /// The gradient at `x0 = 0` and its derivative by `x0` (`g = gc + xc x0`).
     tri: [[Mat<T, NU, NU>; NC]; NC],
-    hd: [Mat<T, NU, NU>; NC],
     ld: [Mat<T, NU, NU>; NC],
     gc: [Vect<T, NU>; NC],
     xc: [Mat<T, NU, NX>; NC],
@@ -628,7 +627,6 @@ impl<
         },
         polished: false,
         tri: [[crate::zeros(); NC]; NC],
-        hd: [crate::zeros(); NC],
         ld: [crate::zeros(); NC],
         gc: [crate::zeros(); NC],
         xc: [crate::zeros(); NC],

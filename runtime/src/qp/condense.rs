@@ -79,7 +79,7 @@ impl<
         stages && free(&t.lbx, &t.ubx) && free(&t.lg, &t.ug)
     }
 
-    /// Builds `H` (`hd`, above the diagonal of `tri`), `gc`, `xc` (module docs). Returns
+    /// Builds `H` (on and above the diagonal of `tri`), `gc`, `xc` (module docs). Returns
     /// `false` (and the Riccati recursion is used) if `NC != N`.
     pub(super) fn condense(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N>) -> bool {
         if NC != N {
@@ -97,7 +97,7 @@ impl<
             let pb = mul_sparse(&p, &s.b);
             let pbt = pb.transpose();
             let pf = pv + mul(&p, &s.f);
-            self.hd[k] = s.r + mul_sparse(&pbt, &s.b);
+            self.tri[k][k] = s.r + mul_sparse(&pbt, &s.b);
             for j in k + 1..NC {
                 mul_sparse_into(&mut self.tri[k][j], &self.xc[j], &s.b);
                 self.gc[j] += mul(&self.xc[j], &s.f);
@@ -131,7 +131,7 @@ impl<
         for (row, vj) in self.tri.iter().zip(v).take(i) {
             mul_sparse_add_into(&mut h, &row[i], vj);
         }
-        mul_sparse_add_into(&mut h, &self.hd[i], &v[i]);
+        mul_sparse_add_into(&mut h, &self.tri[i][i], &v[i]);
         for (hji, vj) in self.tri[i].iter().zip(v).skip(i + 1) {
             tr_mul_add_into(&mut h, hji, vj);
         }
@@ -161,7 +161,7 @@ impl<
     /// `tri`; see [`block_cholesky`].
     pub(super) fn condensed_factorize(&mut self) -> bool {
         for j in 0..NC.min(N) {
-            self.ld[j] = self.hd[j] + Mat::from_diagonal(&self.ru[j].sigma(None));
+            self.ld[j] = self.tri[j][j] + Mat::from_diagonal(&self.ru[j].sigma(None));
         }
         self.block_cholesky(false)
     }
@@ -279,7 +279,7 @@ impl<
             for k in 0..n {
                 let r = &self.ru[k];
                 for i in 0..NU {
-                    let h = self.hd[k][(i, i)].max(T::EPSILON);
+                    let h = self.tri[k][k][(i, i)].max(T::EPSILON);
                     let step = v[k][i] - mu[k][i] / h;
                     let lo = r.has_lo[i] && step < r.lo[i];
                     let hi = !lo && r.has_hi[i] && step > r.hi[i];
@@ -342,7 +342,7 @@ impl<
         let fixed = |k: usize, i: usize| lower[k][i] || upper[k][i];
         for i in 0..n {
             for j in 0..=i {
-                let mut m = if i == j { self.hd[i] } else { self.tri[j][i] };
+                let mut m = self.tri[j][i];
                 for p in 0..NU {
                     for q in 0..NU {
                         if fixed(i, p) || fixed(j, q) {
