@@ -864,13 +864,7 @@ fn state_bound_slots_match_clarabel_and_the_rows_of_every_state() {
             plan_of(slots.solution()),
             "seed {seed}"
         );
-        let mut free = qp;
-        for (lo, hi) in free.stages.iter_mut().map(|s| (&mut s.lbx, &mut s.ubx)) {
-            lo.fill(f64::NEG_INFINITY);
-            hi.fill(f64::INFINITY);
-        }
-        free.terminal.lbx.fill(f64::NEG_INFINITY);
-        free.terminal.ubx.fill(f64::INFINITY);
+        let free = state_subset_qp::<6, 2, 1, 1, 12>(seed, &[]);
         let mut unbounded = Box::new(QpSolver::<f64, 6, 2, 1, 1, 12>::NEW);
         unbounded.settings = slots.settings;
         unbounded.solve(&free);
