@@ -2,6 +2,9 @@
 //! (`docs/bench.md`): x0 = (0,0,2, 1,0,0,0, 0,0,0), reference (4,0,2) hover, first guess
 //! x_k = x0, u_k = 0, u0 held for one period, plant = the same ODE with RK4 in 10 substeps,
 //! 4 s. Times the preparation and feedback phases of every step over several rounds.
+//! `--model pointmass`: the paper's point-mass MPC from rest to a 1 m step in x, the exact
+//! triple-integrator plant, 4 s (the generated solver feeds the applied jerk back as its
+//! `u_prev` itself).
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -16,11 +19,22 @@ use crate::BenchArgs;
 /// Seconds flown in every round.
 const DURATION: f64 = 4.0;
 
+/// The problems `--model` selects.
+const MODELS: &str = "qrbench (QR-bench of docs/bench.md), pointmass (the paper's point-mass MPC)";
+
+/// CSV header of the QR-bench closed loops (the anchors' columns).
+const QRBENCH_COLUMNS: &str = "t,px,py,pz,qw,qx,qy,qz,vx,vy,vz,c,wx,wy,wz";
+
+/// CSV header of the point-mass closed loop.
+const POINTMASS_COLUMNS: &str = "t,px,py,pz,vx,vy,vz,ax,ay,az,jx,jy,jz";
+
 /// One closed loop: the states (row k at t = k dt) and controls, and per-step figures.
 pub(crate) struct ClosedLoop {
     pub dt: f64,
-    pub states: Vec<[f64; 10]>,
-    pub controls: Vec<[f64; 4]>,
+    /// The CSV header: `t`, the states, the controls.
+    pub columns: &'static str,
+    pub states: Vec<Vec<f64>>,
+    pub controls: Vec<Vec<f64>>,
     pub prepare_us: Vec<f64>,
     pub feedback_us: Vec<f64>,
     pub qp_iterations: Vec<u32>,
@@ -43,7 +57,8 @@ macro_rules! fly {
         let dt = f64::from(m::DT);
         let mut out = ClosedLoop {
             dt,
-            states: vec![X0],
+            columns: QRBENCH_COLUMNS,
+            states: vec![X0.to_vec()],
             controls: Vec::new(),
             prepare_us: Vec::new(),
             feedback_us: Vec::new(),
@@ -70,12 +85,72 @@ macro_rules! fly {
             out.feedback_us.push((t2 - t1).as_secs_f64() * 1e6);
             out.qp_iterations.push(info.qp.iterations);
             let u = s.u0().map(f64::from);
-            out.controls.push(u);
+            out.controls.push(u.to_vec());
             x = plant(&x, &u, dt, 10);
-            out.states.push(x);
+            out.states.push(x.to_vec());
         }
         out
     }};
+}
+
+/// The point-mass solver compiled in.
+const POINTMASS: &str = "paper_pointmass (the paper's point-mass MPC: N = 10, dt = 0.04, f64)";
+
+/// The point mass one period on: each axis a triple integrator (position, velocity,
+/// acceleration) driven by the jerk `j`, integrated exactly.
+pub(crate) fn pointmass_plant(x: &[f64; 9], j: &[f64; 3], dt: f64) -> [f64; 9] {
+    let mut next = *x;
+    for i in 0..3 {
+        let (p, v, a) = (x[i], x[3 + i], x[6 + i]);
+        next[i] = p + v * dt + a * dt * dt / 2.0 + j[i] * dt * dt * dt / 6.0;
+        next[3 + i] = v + a * dt + j[i] * dt * dt / 2.0;
+        next[6 + i] = a + j[i] * dt;
+    }
+    next
+}
+
+/// Flies the point mass once: from rest at the origin to the reference 1 m along x (the
+/// closed loop of `cargo bench --bench generated -- pointmass`).
+fn fly_pointmass(sqp: bool) -> ClosedLoop {
+    use paper_pointmass as m;
+    let mut s = Box::new(m::Solver::new());
+    let mut xref = [0.0; 9];
+    xref[0] = 1.0;
+    let mut out = ClosedLoop {
+        dt: m::DT,
+        columns: POINTMASS_COLUMNS,
+        states: vec![vec![0.0; 9]],
+        controls: Vec::new(),
+        prepare_us: Vec::new(),
+        feedback_us: Vec::new(),
+        qp_iterations: Vec::new(),
+        sqp_iterations: Vec::new(),
+        sqp_limit_steps: 0,
+        all_ok: s.set_xref_all(&xref).is_ok(),
+    };
+    let mut x = [0.0; 9];
+    for _ in 0..(DURATION / m::DT).round() as usize {
+        let t0 = Instant::now();
+        s.prepare();
+        let t1 = Instant::now();
+        let _ = s.set_x0(&x);
+        let info = if sqp { s.solve_sqp() } else { s.feedback() };
+        let t2 = Instant::now();
+        match info.status {
+            m::RtiStatus::Ok => {}
+            m::RtiStatus::MaxIterations if sqp => out.sqp_limit_steps += 1,
+            _ => out.all_ok = false,
+        }
+        out.sqp_iterations.push(info.sqp_iterations);
+        out.prepare_us.push((t1 - t0).as_secs_f64() * 1e6);
+        out.feedback_us.push((t2 - t1).as_secs_f64() * 1e6);
+        out.qp_iterations.push(info.qp.iterations);
+        let j = s.u0();
+        out.controls.push(j.to_vec());
+        x = pointmass_plant(&x, &j, m::DT);
+        out.states.push(x.to_vec());
+    }
+    out
 }
 
 /// The cases compiled in: (horizon, f32).
@@ -174,7 +249,7 @@ struct Report {
 /// control applied then; the last row holds the state only.
 pub(crate) fn write_csv(path: &Path, run: &ClosedLoop) -> std::io::Result<()> {
     use std::fmt::Write as _;
-    let mut s = String::from("t,px,py,pz,qw,qx,qy,qz,vx,vy,vz,c,wx,wy,wz\n");
+    let mut s = format!("{}\n", run.columns);
     for (k, x) in run.states.iter().enumerate() {
         let _ = write!(s, "{}", k as f64 * run.dt);
         for v in x {
@@ -186,7 +261,11 @@ pub(crate) fn write_csv(path: &Path, run: &ClosedLoop) -> std::io::Result<()> {
                     let _ = write!(s, ",{v:e}");
                 }
             }
-            None => s.push_str(",,,,"),
+            None => {
+                for _ in 0..run.controls.first().map_or(0, Vec::len) {
+                    s.push(',');
+                }
+            }
         }
         s.push('\n');
     }
@@ -197,29 +276,43 @@ pub(crate) fn write_csv(path: &Path, run: &ClosedLoop) -> std::io::Result<()> {
 }
 
 pub(crate) fn run(args: &BenchArgs) -> ExitCode {
-    if args.model != "qrbench" {
-        eprintln!(
-            "error: --model {}: unknown; the benchmark problem is qrbench (QR-bench of \
-             docs/bench.md)",
-            args.model
-        );
-        return ExitCode::from(2);
-    }
-    let Some(&(_, _, solver)) = CASES
-        .iter()
-        .find(|c| c.0 == args.horizon && c.1 == args.f32)
-    else {
-        let have: Vec<String> = CASES
+    let pointmass = match args.model.as_str() {
+        "qrbench" => false,
+        "pointmass" => true,
+        other => {
+            eprintln!("error: --model {other}: unknown; the benchmark problems are {MODELS}");
+            return ExitCode::from(2);
+        }
+    };
+    let solver = if pointmass {
+        if args.horizon != 10 || args.f32 {
+            eprintln!(
+                "error: --model pointmass --horizon {}{}: no solver generated for this case; \
+                 compiled in: --horizon 10 (f64)",
+                args.horizon,
+                if args.f32 { " --f32" } else { "" },
+            );
+            return ExitCode::from(2);
+        }
+        POINTMASS
+    } else {
+        let Some(&(_, _, solver)) = CASES
             .iter()
-            .map(|c| format!("--horizon {}{}", c.0, if c.1 { " --f32" } else { "" }))
-            .collect();
-        eprintln!(
-            "error: --horizon {}{}: no solver generated for this case; compiled in: {}",
-            args.horizon,
-            if args.f32 { " --f32" } else { "" },
-            have.join(", ")
-        );
-        return ExitCode::from(2);
+            .find(|c| c.0 == args.horizon && c.1 == args.f32)
+        else {
+            let have: Vec<String> = CASES
+                .iter()
+                .map(|c| format!("--horizon {}{}", c.0, if c.1 { " --f32" } else { "" }))
+                .collect();
+            eprintln!(
+                "error: --horizon {}{}: no solver generated for this case; compiled in: {}",
+                args.horizon,
+                if args.f32 { " --f32" } else { "" },
+                have.join(", ")
+            );
+            return ExitCode::from(2);
+        };
+        solver
     };
     if args.rounds == 0 {
         eprintln!("error: --rounds 0: run at least one round");
@@ -230,8 +323,13 @@ pub(crate) fn run(args: &BenchArgs) -> ExitCode {
     let mut total = Vec::new();
     let mut last = None;
     for _ in 0..args.rounds {
-        let Some(run) = fly_case(args.horizon, args.f32, args.sqp) else {
-            return ExitCode::FAILURE;
+        let run = if pointmass {
+            fly_pointmass(args.sqp)
+        } else {
+            let Some(run) = fly_case(args.horizon, args.f32, args.sqp) else {
+                return ExitCode::FAILURE;
+            };
+            run
         };
         prep.extend(&run.prepare_us);
         feed.extend(&run.feedback_us);
@@ -250,12 +348,19 @@ pub(crate) fn run(args: &BenchArgs) -> ExitCode {
         None
     } else {
         let path = args.csv.clone().unwrap_or_else(|| {
-            PathBuf::from(format!(
-                "bench-out/qrbench_n{}_{}{}.csv",
-                args.horizon,
-                if args.f32 { "f32" } else { "f64" },
-                if args.sqp { "_sqp" } else { "" }
-            ))
+            PathBuf::from(if pointmass {
+                format!(
+                    "bench-out/pointmass_f64{}.csv",
+                    if args.sqp { "_sqp" } else { "" }
+                )
+            } else {
+                format!(
+                    "bench-out/qrbench_n{}_{}{}.csv",
+                    args.horizon,
+                    if args.f32 { "f32" } else { "f64" },
+                    if args.sqp { "_sqp" } else { "" }
+                )
+            })
         });
         if let Err(e) = write_csv(&path, &run) {
             eprintln!("error: {}: {e}", path.display());
@@ -263,8 +368,19 @@ pub(crate) fn run(args: &BenchArgs) -> ExitCode {
         }
         Some(path)
     };
-    let last_x = run.states.last().copied().unwrap_or(X0);
-    let err = ((last_x[0] - 4.0).powi(2) + last_x[1].powi(2) + (last_x[2] - 2.0).powi(2)).sqrt();
+    // The distance of the final position from the target: (4, 0, 2) or (1, 0, 0).
+    let target = if pointmass {
+        [1.0, 0.0, 0.0]
+    } else {
+        [4.0, 0.0, 2.0]
+    };
+    let err = run.states.last().map_or(f64::INFINITY, |x| {
+        x.iter()
+            .zip(target)
+            .map(|(p, t)| (p - t).powi(2))
+            .sum::<f64>()
+            .sqrt()
+    });
     let iters: Vec<f64> = run.qp_iterations.iter().map(|&i| f64::from(i)).collect();
     let report = Report {
         model: args.model.clone(),
@@ -300,8 +416,11 @@ pub(crate) fn run(args: &BenchArgs) -> ExitCode {
         }
     } else {
         println!(
-            "QR-bench, {solver}, {} mode: {} rounds x {} steps",
-            report.mode, report.rounds, report.steps
+            "{}, {solver}, {} mode: {} rounds x {} steps",
+            if pointmass { "Point mass" } else { "QR-bench" },
+            report.mode,
+            report.rounds,
+            report.steps
         );
         println!(
             "{:<10} {:>10} {:>10} {:>10} {:>10}",

@@ -117,6 +117,81 @@ fn f32_solver_flies_the_same_closed_loop() {
     assert!(d < 1e-3, "f32 closed loop {d} m from f64");
 }
 
+/// `--model pointmass`: the paper's point-mass MPC flies its closed loop, in RTI and in SQP
+/// mode. The CSV has the point mass's columns, and every row follows from the one before
+/// by the exact triple integrator under the applied jerk (recomputed here in closed form);
+/// the jerk and the acceleration stay within the model's bounds (50, 20); the JSON's final
+/// error is the CSV's last row's distance from the target (1, 0, 0), and the mass has come
+/// most of the way from the origin.
+#[test]
+fn pointmass_closed_loop_follows_the_plant_within_the_bounds() {
+    for mode in [None, Some("--sqp")] {
+        let csv = tmp(&format!("bench_pointmass{}.csv", mode.unwrap_or("")));
+        let mut args = vec![
+            "bench",
+            "--model",
+            "pointmass",
+            "--rounds",
+            "1",
+            "--json",
+            "--csv",
+            csv.to_str().unwrap(),
+        ];
+        args.extend(mode);
+        let (code, out, err) = mpcc(&args);
+        assert_eq!(code, Some(0), "{mode:?}: {err}");
+        let v: serde_json::Value = serde_json::from_str(out.trim()).expect("one JSON object");
+        assert_eq!(v["model"], "pointmass");
+        assert_eq!(v["steps"], 100);
+        assert_eq!(v["all_ok"], serde_json::Value::Bool(true));
+        let mut rdr = csv::Reader::from_path(&csv).unwrap();
+        let header: Vec<String> = rdr.headers().unwrap().iter().map(String::from).collect();
+        assert_eq!(header.join(","), "t,px,py,pz,vx,vy,vz,ax,ay,az,jx,jy,jz");
+        let rows: Vec<Vec<Option<f64>>> = rdr
+            .records()
+            .map(|r| r.unwrap().iter().map(|f| f.parse().ok()).collect())
+            .collect();
+        assert_eq!(rows.len(), 101);
+        let dt = 0.04;
+        for (k, pair) in rows.windows(2).enumerate() {
+            let (x, j) = (&pair[0][1..10], &pair[0][10..13]);
+            let next = &pair[1][1..10];
+            for i in 0..3 {
+                let (p, vel, a, jerk) = (
+                    x[i].unwrap(),
+                    x[3 + i].unwrap(),
+                    x[6 + i].unwrap(),
+                    j[i].unwrap(),
+                );
+                let want = [
+                    p + vel * dt + a * dt * dt / 2.0 + jerk * dt.powi(3) / 6.0,
+                    vel + a * dt + jerk * dt * dt / 2.0,
+                    a + jerk * dt,
+                ];
+                for (w, got) in want.iter().zip([next[i], next[3 + i], next[6 + i]]) {
+                    let got = got.unwrap();
+                    assert!(
+                        (w - got).abs() <= 1e-12 * w.abs().max(1.0),
+                        "{mode:?} row {k}"
+                    );
+                }
+                assert!(jerk.abs() <= 50.0 + 1e-6, "{mode:?} row {k}: jerk {jerk}");
+                assert!(a.abs() <= 20.0 + 1e-6, "{mode:?} row {k}: acceleration {a}");
+            }
+        }
+        let last = &rows[100];
+        assert!(
+            last[10..].iter().all(Option::is_none),
+            "the last row holds the state only"
+        );
+        let p: Vec<f64> = last[1..4].iter().map(|v| v.unwrap()).collect();
+        let dist = ((p[0] - 1.0).powi(2) + p[1].powi(2) + p[2].powi(2)).sqrt();
+        let e = v["final_position_error_m"].as_f64().unwrap();
+        assert!((e - dist).abs() < 1e-9, "{mode:?}: {e} against {dist}");
+        assert!(e < 0.2, "{mode:?}: {e} m from the target after 4 s");
+    }
+}
+
 #[test]
 fn unsupported_cases_are_refused_with_what_exists() {
     for (args, want) in [
@@ -130,7 +205,11 @@ fn unsupported_cases_are_refused_with_what_exists() {
         ),
         (
             vec!["bench", "--model", "pendulum"],
-            "--model pendulum: unknown",
+            "--model pendulum: unknown; the benchmark problems are qrbench",
+        ),
+        (
+            vec!["bench", "--model", "pointmass", "--f32"],
+            "compiled in: --horizon 10 (f64)",
         ),
         (vec!["bench", "--rounds", "0"], "--rounds 0"),
     ] {
