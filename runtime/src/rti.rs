@@ -380,11 +380,14 @@ impl<
         if !(all_finite(w) && all_finite(wn)) {
             return Err(SetError::NonFinite);
         }
-        symmetric_part_into(&mut self.w, w);
-        symmetric_part_into(&mut self.wn, wn);
+        // Weights equal to the current ones (a generated solver sets them again whenever a
+        // stage-0 parameter changes) keep the Gauss-Newton terms.
+        let changed = symmetric_part_into(&mut self.w, w) | symmetric_part_into(&mut self.wn, wn);
         self.w_diag = is_diagonal(w);
         self.wn_diag = is_diagonal(wn);
-        self.gn_current = false;
+        if changed {
+            self.gn_current = false;
+        }
         Ok(())
     }
 
@@ -866,15 +869,22 @@ impl<
 }
 
 /// `out = m / 2 + m' / 2`, entry by entry (no temporaries: a Cortex-M4F's set-up took 3.5 KB
-/// of stack for them).
-fn symmetric_part_into<T: Real, const R: usize>(out: &mut SMatrix<T, R, R>, m: &SMatrix<T, R, R>) {
+/// of stack for them); whether an entry changed (`!=`).
+fn symmetric_part_into<T: Real, const R: usize>(
+    out: &mut SMatrix<T, R, R>,
+    m: &SMatrix<T, R, R>,
+) -> bool {
     let half = T::lit(0.5);
     let md = &m.data.0;
+    let mut changed = false;
     for (c, col) in out.data.0.iter_mut().enumerate() {
         for (r, o) in col.iter_mut().enumerate() {
-            *o = md[c][r] * half + md[r][c] * half;
+            let v = md[c][r] * half + md[r][c] * half;
+            changed |= v != *o;
+            *o = v;
         }
     }
+    changed
 }
 
 /// Whether every off-diagonal entry of `m` is zero.

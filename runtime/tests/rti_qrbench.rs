@@ -202,14 +202,26 @@ fn gauss_newton_terms_match_j_w_j_for_diagonal_and_dense_weights() {
 /// A model that declares its residual Jacobians constant (`J'WJ` then kept between
 /// linearizations) flies the same closed loop bit for bit as the same model without the
 /// declaration, through weight changes: every QP has the same Hessians, and after a
-/// `set_weights` they are the new weights' `J'WJ`, not the old ones kept.
+/// `set_weights` they are the new weights' `J'WJ`, not the old ones kept (and after a
+/// `set_weights` with the same weights, still theirs).
 #[test]
 fn constant_residual_jacobians_keep_j_w_j_until_the_weights_change() {
     use support::quadrotor::qrbench_constant_jacobians;
     let dt = 0.05;
     let (mut a, mut b) = (qrbench::<20>(dt), qrbench_constant_jacobians::<20>(dt));
     let mut x = SVector::<f64, NX>::from(X0);
+    let mut weights = (
+        nalgebra::SMatrix::<f64, 14, 14>::zeros(),
+        nalgebra::SMatrix::<f64, NX, NX>::zeros(),
+    );
     for k in 0..40 {
+        if k == 22 {
+            // The same weights again (a generated solver sets them whenever a stage-0
+            // parameter changes): the cached J'WJ stays valid.
+            let (w, wn) = (weights.0, weights.1);
+            a.set_weights(&w, &wn).unwrap();
+            b.set_weights(&w, &wn).unwrap();
+        }
         if k == 15 || k == 30 {
             // Heavier position weights, then a dense coupling (the product path).
             let scale = if k == 15 { 3.0 } else { 0.5 };
@@ -228,6 +240,7 @@ fn constant_residual_jacobians_keep_j_w_j_until_the_weights_change() {
             let wn = nalgebra::SMatrix::<f64, NX, NX>::identity() * (50.0 * scale);
             a.set_weights(&w, &wn).unwrap();
             b.set_weights(&w, &wn).unwrap();
+            weights = (w, wn);
         }
         a.prepare();
         b.prepare();
