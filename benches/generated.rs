@@ -94,16 +94,7 @@ fn benches(c: &mut Criterion) {
         };
         // The exact plant: the triple integrator over dt with the applied jerk.
         let plant = |s: &m::Solver, x: &[f64; 9]| -> [f64; 9] {
-            let j = s.u0();
-            let dt = m::DT;
-            let mut n = *x;
-            for i in 0..3 {
-                let (p, v, a) = (x[i], x[3 + i], x[6 + i]);
-                n[i] = p + v * dt + a * dt * dt / 2.0 + j[i] * dt * dt * dt / 6.0;
-                n[3 + i] = v + a * dt + j[i] * dt * dt / 2.0;
-                n[6 + i] = a + j[i] * dt;
-            }
-            n
+            mpc_sim::pointmass::plant(x, &s.u0(), m::DT)
         };
         closed_loop_group!(c, "pointmass", 100, new(), plant);
     }

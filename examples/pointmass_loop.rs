@@ -29,16 +29,7 @@ fn main() {
             std::process::exit(1);
         }
         iterations += s.feedback().qp.iterations;
-        let j = s.u0();
-        let dt = m::DT;
-        let mut next = x;
-        for i in 0..3 {
-            let (p, v, a) = (x[i], x[3 + i], x[6 + i]);
-            next[i] = p + v * dt + a * dt * dt / 2.0 + j[i] * dt * dt * dt / 6.0;
-            next[3 + i] = v + a * dt + j[i] * dt * dt / 2.0;
-            next[6 + i] = a + j[i] * dt;
-        }
-        x = next;
+        x = mpc_sim::pointmass::plant(&x, &s.u0(), m::DT);
     }
     println!("QP iterations: {iterations} in 100 steps; final state {x:?}");
 }

@@ -96,19 +96,6 @@ macro_rules! fly {
 /// The point-mass solver compiled in.
 const POINTMASS: &str = "paper_pointmass (the paper's point-mass MPC: N = 10, dt = 0.04, f64)";
 
-/// The point mass one period on: each axis a triple integrator (position, velocity,
-/// acceleration) driven by the jerk `j`, integrated exactly.
-pub(crate) fn pointmass_plant(x: &[f64; 9], j: &[f64; 3], dt: f64) -> [f64; 9] {
-    let mut next = *x;
-    for i in 0..3 {
-        let (p, v, a) = (x[i], x[3 + i], x[6 + i]);
-        next[i] = p + v * dt + a * dt * dt / 2.0 + j[i] * dt * dt * dt / 6.0;
-        next[3 + i] = v + a * dt + j[i] * dt * dt / 2.0;
-        next[6 + i] = a + j[i] * dt;
-    }
-    next
-}
-
 /// Flies the point mass once: from rest at the origin to the reference 1 m along x (the
 /// closed loop of `cargo bench --bench generated -- pointmass`).
 fn fly_pointmass(sqp: bool) -> ClosedLoop {
@@ -147,7 +134,7 @@ fn fly_pointmass(sqp: bool) -> ClosedLoop {
         out.qp_iterations.push(info.qp.iterations);
         let j = s.u0();
         out.controls.push(j.to_vec());
-        x = pointmass_plant(&x, &j, m::DT);
+        x = mpc_sim::pointmass::plant(&x, &j, m::DT);
         out.states.push(x.to_vec());
     }
     out

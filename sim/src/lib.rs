@@ -15,6 +15,7 @@ pub mod log;
 pub mod mission;
 pub mod plant;
 pub mod plot;
+pub mod pointmass;
 pub mod probe;
 pub mod qrbench;
 pub mod rate_loop;
