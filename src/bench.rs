@@ -10,6 +10,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
 
+use mpc_runtime::RtiStatus;
 use serde::Serialize;
 
 use mpc_sim::qrbench::{X0, plant};
@@ -45,6 +46,50 @@ pub(crate) struct ClosedLoop {
     pub all_ok: bool,
 }
 
+/// What one step took and gave: its status, its QP's and SQP's iterations, and when it
+/// started, finished preparing and finished.
+struct Step {
+    status: RtiStatus,
+    qp_iterations: u32,
+    sqp_iterations: u32,
+    times: [Instant; 3],
+}
+
+impl ClosedLoop {
+    /// A closed loop at its start `x0`, no step yet.
+    fn new(dt: f64, columns: &'static str, x0: Vec<f64>) -> Self {
+        ClosedLoop {
+            dt,
+            columns,
+            states: vec![x0],
+            controls: Vec::new(),
+            prepare_us: Vec::new(),
+            feedback_us: Vec::new(),
+            qp_iterations: Vec::new(),
+            sqp_iterations: Vec::new(),
+            sqp_limit_steps: 0,
+            all_ok: true,
+        }
+    }
+
+    /// Records a step (`sqp`: in SQP mode, where the iteration limit keeps the iterate), the
+    /// control it applied and the state it led to.
+    fn record(&mut self, sqp: bool, step: &Step, u: Vec<f64>, x: Vec<f64>) {
+        match step.status {
+            RtiStatus::Ok => {}
+            RtiStatus::MaxIterations if sqp => self.sqp_limit_steps += 1,
+            _ => self.all_ok = false,
+        }
+        let [t0, t1, t2] = step.times;
+        self.sqp_iterations.push(step.sqp_iterations);
+        self.prepare_us.push((t1 - t0).as_secs_f64() * 1e6);
+        self.feedback_us.push((t2 - t1).as_secs_f64() * 1e6);
+        self.qp_iterations.push(step.qp_iterations);
+        self.controls.push(u);
+        self.states.push(x);
+    }
+}
+
 /// Flies QR-bench once with solver crate `$m` (its `Real` may be f32 or f64).
 macro_rules! fly {
     ($m:ident, $sqp:expr) => {{
@@ -55,18 +100,7 @@ macro_rules! fly {
         let _ = s.set_guess(&x0, &[0.0; 4]);
         let steps = (DURATION / f64::from(m::DT)).round() as usize;
         let dt = f64::from(m::DT);
-        let mut out = ClosedLoop {
-            dt,
-            columns: QRBENCH_COLUMNS,
-            states: vec![X0.to_vec()],
-            controls: Vec::new(),
-            prepare_us: Vec::new(),
-            feedback_us: Vec::new(),
-            qp_iterations: Vec::new(),
-            sqp_iterations: Vec::new(),
-            sqp_limit_steps: 0,
-            all_ok: true,
-        };
+        let mut out = ClosedLoop::new(dt, QRBENCH_COLUMNS, X0.to_vec());
         let mut x = X0;
         for _ in 0..steps {
             let t0 = Instant::now();
@@ -74,20 +108,15 @@ macro_rules! fly {
             let t1 = Instant::now();
             let _ = s.set_x0(&x.map(cast));
             let info = if $sqp { s.solve_sqp() } else { s.feedback() };
-            let t2 = Instant::now();
-            match info.status {
-                m::RtiStatus::Ok => {}
-                m::RtiStatus::MaxIterations if $sqp => out.sqp_limit_steps += 1,
-                _ => out.all_ok = false,
-            }
-            out.sqp_iterations.push(info.sqp_iterations);
-            out.prepare_us.push((t1 - t0).as_secs_f64() * 1e6);
-            out.feedback_us.push((t2 - t1).as_secs_f64() * 1e6);
-            out.qp_iterations.push(info.qp.iterations);
+            let step = Step {
+                status: info.status,
+                qp_iterations: info.qp.iterations,
+                sqp_iterations: info.sqp_iterations,
+                times: [t0, t1, Instant::now()],
+            };
             let u = s.u0().map(f64::from);
-            out.controls.push(u.to_vec());
             x = plant(&x, &u, dt, 10);
-            out.states.push(x.to_vec());
+            out.record($sqp, &step, u.to_vec(), x.to_vec());
         }
         out
     }};
@@ -103,18 +132,8 @@ fn fly_pointmass(sqp: bool) -> ClosedLoop {
     let mut s = Box::new(m::Solver::new());
     let mut xref = [0.0; 9];
     xref[0] = 1.0;
-    let mut out = ClosedLoop {
-        dt: m::DT,
-        columns: POINTMASS_COLUMNS,
-        states: vec![vec![0.0; 9]],
-        controls: Vec::new(),
-        prepare_us: Vec::new(),
-        feedback_us: Vec::new(),
-        qp_iterations: Vec::new(),
-        sqp_iterations: Vec::new(),
-        sqp_limit_steps: 0,
-        all_ok: s.set_xref_all(&xref).is_ok(),
-    };
+    let mut out = ClosedLoop::new(m::DT, POINTMASS_COLUMNS, vec![0.0; 9]);
+    out.all_ok = s.set_xref_all(&xref).is_ok();
     let mut x = [0.0; 9];
     for _ in 0..(DURATION / m::DT).round() as usize {
         let t0 = Instant::now();
@@ -122,20 +141,15 @@ fn fly_pointmass(sqp: bool) -> ClosedLoop {
         let t1 = Instant::now();
         let _ = s.set_x0(&x);
         let info = if sqp { s.solve_sqp() } else { s.feedback() };
-        let t2 = Instant::now();
-        match info.status {
-            m::RtiStatus::Ok => {}
-            m::RtiStatus::MaxIterations if sqp => out.sqp_limit_steps += 1,
-            _ => out.all_ok = false,
-        }
-        out.sqp_iterations.push(info.sqp_iterations);
-        out.prepare_us.push((t1 - t0).as_secs_f64() * 1e6);
-        out.feedback_us.push((t2 - t1).as_secs_f64() * 1e6);
-        out.qp_iterations.push(info.qp.iterations);
+        let step = Step {
+            status: info.status,
+            qp_iterations: info.qp.iterations,
+            sqp_iterations: info.sqp_iterations,
+            times: [t0, t1, Instant::now()],
+        };
         let j = s.u0();
-        out.controls.push(j.to_vec());
         x = mpc_sim::pointmass::plant(&x, &j, m::DT);
-        out.states.push(x.to_vec());
+        out.record(sqp, &step, j.to_vec(), x.to_vec());
     }
     out
 }
