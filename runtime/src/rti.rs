@@ -232,7 +232,10 @@ fn weighted_transpose<T: Real, const R: usize, const C: usize>(
     diag: bool,
     j: &SMatrix<T, R, C>,
 ) -> SMatrix<T, C, R> {
-    // One array for both cases (the kernels' own would each take a slot in the frame).
+    // One array for both cases (the kernels' own would each take a slot in the frame). The
+    // diagonal case is `scaled_transpose` written out here: through an in-place form of
+    // that kernel it took 224 B more code, 650 more instructions per step and 40 B more
+    // stack on the Cortex-M4F.
     let mut out = SMatrix::<T, C, R>::zeros();
     if diag {
         let (o, jd, wd) = (&mut out.data.0, &j.data.0, &w.data.0);
