@@ -34,8 +34,8 @@ pub mod rti;
 pub use model::Model;
 pub use nalgebra;
 pub use qp::{
-    OcpQp, QpInfo, QpMethod, QpSettings, QpSolution, QpSolver, QpStage, QpStatus, QpTerminal,
-    condensing_pays,
+    OcpQp, QpHessian, QpInfo, QpMethod, QpSettings, QpSolution, QpSolver, QpStage, QpStatus,
+    QpTerminal, condensing_pays,
 };
 pub use real::Real;
 pub use rti::{Rti, RtiInfo, RtiSettings, RtiStatus, SetError};

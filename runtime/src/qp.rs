@@ -63,15 +63,29 @@ const WARM_LAM_FLOOR: f64 = 1e-4;
 /// Iterations without primal progress after which a QP is declared infeasible.
 const STALL_LIMIT: u32 = 10;
 
-/// Data of one stage `k < N`.
+/// The cost Hessian of a stage `k < N` (in [`OcpQp::hessians`]).
 #[derive(Clone, Copy, Debug)]
-pub struct QpStage<T: Real, const NX: usize, const NU: usize, const NG: usize> {
+pub struct QpHessian<T: Real, const NX: usize, const NU: usize> {
     /// State Hessian `Q`.
     pub q: Mat<T, NX, NX>,
     /// Cross term `S` (`u'S x`).
     pub s: Mat<T, NU, NX>,
     /// Control Hessian `R`.
     pub r: Mat<T, NU, NU>,
+}
+
+impl<T: Real, const NX: usize, const NU: usize> QpHessian<T, NX, NU> {
+    /// All zeros.
+    pub const NEW: Self = QpHessian {
+        q: crate::zeros(),
+        s: crate::zeros(),
+        r: crate::zeros(),
+    };
+}
+
+/// Data of one stage `k < N` but its Hessian ([`QpHessian`], in [`OcpQp::hessians`]).
+#[derive(Clone, Copy, Debug)]
+pub struct QpStage<T: Real, const NX: usize, const NU: usize, const NG: usize> {
     /// State gradient.
     pub gx: Vect<T, NX>,
     /// Control gradient.
@@ -134,9 +148,6 @@ pub struct QpTerminal<T: Real, const NX: usize, const NGN: usize> {
 impl<T: Real, const NX: usize, const NU: usize, const NG: usize> QpStage<T, NX, NU, NG> {
     /// All zeros, bounds absent, general constraints hard (zero penalties).
     pub const NEW: Self = QpStage {
-        q: crate::zeros(),
-        s: crate::zeros(),
-        r: crate::zeros(),
         gx: crate::zeros(),
         gu: crate::zeros(),
         a: crate::zeros(),
@@ -171,6 +182,12 @@ impl<T: Real, const NX: usize, const NGN: usize> QpTerminal<T, NX, NGN> {
 }
 
 /// A whole OCP-QP.
+///
+/// `NH` is `N`, a Hessian per stage, or `1`: one Hessian for every stage `k < N`, a cost that
+/// does not change along the horizon (a least-squares cost with one weight and Jacobians that
+/// are constants, as `x - xref`, gives one). With `1` the QP's data is smaller by `N - 1`
+/// Hessians (`(N - 1)(NX + NU)^2` numbers); the arithmetic is that of `N` copies. Other values
+/// fail to compile.
 #[derive(Clone, Copy, Debug)]
 pub struct OcpQp<
     T: Real,
@@ -179,24 +196,64 @@ pub struct OcpQp<
     const NG: usize,
     const NGN: usize,
     const N: usize,
+    const NH: usize = N,
 > {
     /// The fixed initial state.
     pub x0: Vect<T, NX>,
     /// Stages `0..N`.
     pub stages: [QpStage<T, NX, NU, NG>; N],
+    /// The Hessians of stages `0..N`: stage `k`'s is `hessians[k]` (`NH = N`) or
+    /// `hessians[0]` (`NH = 1`).
+    pub hessians: [QpHessian<T, NX, NU>; NH],
     /// Stage `N`.
     pub terminal: QpTerminal<T, NX, NGN>,
 }
 
-impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usize, const N: usize>
-    OcpQp<T, NX, NU, NG, NGN, N>
+impl<
+    T: Real,
+    const NX: usize,
+    const NU: usize,
+    const NG: usize,
+    const NGN: usize,
+    const N: usize,
+    const NH: usize,
+> OcpQp<T, NX, NU, NG, NGN, N, NH>
 {
     /// All zeros, bounds absent.
     pub const NEW: Self = OcpQp {
         x0: crate::zeros(),
         stages: [QpStage::NEW; N],
+        hessians: {
+            assert!(NH == N || NH == 1, "NH must be N or 1");
+            [QpHessian::NEW; NH]
+        },
         terminal: QpTerminal::NEW,
     };
+
+    /// The Hessian of stage `k < N`, `None` beyond.
+    pub fn hessian(&self, k: usize) -> Option<&QpHessian<T, NX, NU>> {
+        if k < N {
+            self.hessians.get(Self::slot(k))
+        } else {
+            None
+        }
+    }
+
+    /// The index in [`hessians`](Self::hessians) of stage `k`'s Hessian.
+    const fn slot(k: usize) -> usize {
+        const { assert!(NH == N || NH == 1, "NH must be N or 1") };
+        if NH == N { k } else { 0 }
+    }
+
+    /// The Hessian of stage `k < N` (the solver's loops run to `N`).
+    pub(crate) fn h(&self, k: usize) -> &QpHessian<T, NX, NU> {
+        &self.hessians[Self::slot(k)]
+    }
+
+    /// The Hessian of stage `k < N`, to write.
+    pub(crate) fn h_mut(&mut self, k: usize) -> &mut QpHessian<T, NX, NU> {
+        &mut self.hessians[Self::slot(k)]
+    }
 
     /// All zeros, the bounds too (every variable fixed at 0): zero-filled memory in a
     /// `static`, for a QP whose every field is written before it is solved (the RTI's).
@@ -216,8 +273,15 @@ impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usiz
     };
 }
 
-impl<T: Real, const NX: usize, const NU: usize, const NG: usize, const NGN: usize, const N: usize>
-    Default for OcpQp<T, NX, NU, NG, NGN, N>
+impl<
+    T: Real,
+    const NX: usize,
+    const NU: usize,
+    const NG: usize,
+    const NGN: usize,
+    const N: usize,
+    const NH: usize,
+> Default for OcpQp<T, NX, NU, NG, NGN, N, NH>
 {
     fn default() -> Self {
         Self::NEW
@@ -679,18 +743,20 @@ impl<
         self.sol = *guess;
     }
 
-    fn check_input(&self, qp: &OcpQp<T, NX, NU, NG, NGN, N>) -> bool {
+    fn check_input<const NH: usize>(&self, qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>) -> bool {
         qp.x0.iter().all(|v| v.finite()) && self.check_stages(qp)
     }
 
     /// Whether the stage and terminal data (all but `x0`) are finite and the penalties
     /// non-negative.
-    fn check_stages(&self, qp: &OcpQp<T, NX, NU, NG, NGN, N>) -> bool {
+    fn check_stages<const NH: usize>(&self, qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>) -> bool {
+        for h in &qp.hessians {
+            if !(finite_mat(&h.q) && finite_mat(&h.s) && finite_mat(&h.r)) {
+                return false;
+            }
+        }
         for s in &qp.stages {
-            let mats = finite_mat(&s.q)
-                && finite_mat(&s.s)
-                && finite_mat(&s.r)
-                && finite_mat(&s.gx)
+            let mats = finite_mat(&s.gx)
                 && finite_mat(&s.gu)
                 && finite_mat(&s.a)
                 && finite_mat(&s.b)
@@ -719,7 +785,10 @@ impl<
             && penalties_ok(&t.soft_l2)
     }
 
-    fn load_bounds(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N>) -> Result<(), BoundError> {
+    fn load_bounds<const NH: usize>(
+        &mut self,
+        qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>,
+    ) -> Result<(), BoundError> {
         for (k, s) in qp.stages.iter().enumerate() {
             if let (Some(rx), Some(ru), Some(rg)) =
                 (self.rx.get_mut(k), self.ru.get_mut(k), self.rg.get_mut(k))
@@ -753,7 +822,7 @@ impl<
     /// Solves `qp`: [`prepare`](Self::prepare) then [`solve_prepared`](Self::solve_prepared).
     /// The solution is available from [`solution`](Self::solution) whatever the status (for a
     /// status other than `Solved` it is the last iterate).
-    pub fn solve(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N>) -> QpInfo<T> {
+    pub fn solve<const NH: usize>(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>) -> QpInfo<T> {
         self.prepare(qp);
         self.solve_prepared(qp)
     }
@@ -765,7 +834,7 @@ impl<
     /// A condensed QP's data are checked and its bounds loaded here too, so that
     /// [`solve_prepared`](Self::solve_prepared) checks only `x0`; data that fail the check
     /// are not condensed, and `solve_prepared` then reports them.
-    pub fn prepare(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N>) {
+    pub fn prepare<const NH: usize>(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>) {
         self.condensed = self.condensing_applies(qp)
             && self.check_stages(qp)
             && self.load_bounds(qp).is_ok()
@@ -775,7 +844,10 @@ impl<
     /// Solves `qp` with the work of the last [`prepare`](Self::prepare), which must have been
     /// given the same QP except for `x0` (anything else may have changed only if the Riccati
     /// recursion was chosen; [`solve`](Self::solve) is the safe call).
-    pub fn solve_prepared(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N>) -> QpInfo<T> {
+    pub fn solve_prepared<const NH: usize>(
+        &mut self,
+        qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>,
+    ) -> QpInfo<T> {
         let info = self.iterate(qp);
         let polish = self.settings.polish && info.status == QpStatus::Solved;
         if self.condensed && info.status != QpStatus::NonFiniteInput {
@@ -817,7 +889,7 @@ impl<
     }
 
     /// The interior-point iteration.
-    fn iterate(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N>) -> QpInfo<T> {
+    fn iterate<const NH: usize>(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>) -> QpInfo<T> {
         let nan = T::ZERO;
         self.polished = false;
         if self.condensed {
@@ -1008,7 +1080,11 @@ impl<
 
     /// `res` from [`residuals`](Self::residuals) with the stationarity residual computed
     /// (the condensed QP's is part of them).
-    fn exact(&self, qp: &OcpQp<T, NX, NU, NG, NGN, N>, mut res: [T; 4]) -> [T; 4] {
+    fn exact<const NH: usize>(
+        &self,
+        qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>,
+        mut res: [T; 4],
+    ) -> [T; 4] {
         if !self.dense() {
             res[0] = self.stationarity(qp);
         }
@@ -1042,7 +1118,7 @@ impl<
     /// 0; otherwise see [`stationarity`](Self::stationarity), which needs this call first).
     /// Soft rows' slacks enter the inequality residual and `s m` the complementarity. The
     /// dynamics and inequality residuals are absolute.
-    fn residuals(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N>) -> [T; 4] {
+    fn residuals<const NH: usize>(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>) -> [T; 4] {
         if self.dense() {
             return self.condensed_residuals();
         }
@@ -1050,6 +1126,7 @@ impl<
         let mut soft = [T::ZERO; 2];
         for k in 0..N {
             let s = &qp.stages[k];
+            let h = qp.h(k);
             let (x, u) = (self.sol.x[k], self.sol.u[k]);
             let xnext = if k + 1 < N {
                 self.sol.x[k + 1]
@@ -1058,8 +1135,8 @@ impl<
             };
             self.rb[k] = mul_sparse(&s.a, &x) + mul_sparse(&s.b, &u) + s.f - xnext;
             re = re.max(self.rb[k].amax());
-            self.hx[k] = mul(&s.q, &x) + tr_mul(&s.s, &u) + s.gx;
-            self.hu[k] = mul(&s.r, &u) + mul(&s.s, &x) + s.gu;
+            self.hx[k] = mul(&h.q, &x) + tr_mul(&h.s, &u) + s.gx;
+            self.hu[k] = mul(&h.r, &u) + mul(&h.s, &x) + s.gu;
             ri = ri
                 .max(self.rx[k].residuals(&x))
                 .max(self.ru[k].residuals(&u, None));
@@ -1093,7 +1170,7 @@ impl<
     /// exceeds 1: rounding makes it no smaller than about `eps` times that. Soft rows'
     /// stationarity `l1 + l2 s - lam - m` is part of it. Only computed when the other
     /// residuals would let the iteration stop (or it ends): it costs about as much as they do.
-    fn stationarity(&self, qp: &OcpQp<T, NX, NU, NG, NGN, N>) -> T {
+    fn stationarity<const NH: usize>(&self, qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>) -> T {
         let [mut rs, soft_scale] = self.soft_stat;
         let mut gscale = soft_scale.max(T::ONE);
         for k in 0..N {
@@ -1138,9 +1215,9 @@ impl<
     /// Backward Riccati factorization of the Newton system's Hessian: the interior point's
     /// (`active` `None`: each row's barrier weight `sigma`), or the polish's (the rows of
     /// the active set with its penalty weight, the others none).
-    fn factorize(
+    fn factorize<const NH: usize>(
         &mut self,
-        qp: &OcpQp<T, NX, NU, NG, NGN, N>,
+        qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>,
         active: Option<&ActiveSet<T, NBX, NU, NG, NGN, N>>,
     ) -> bool {
         if N == 0 {
@@ -1169,6 +1246,7 @@ impl<
         // P_{k+1} is read in pn[k] by stage k, which builds P_k in pn[k - 1].
         for k in (0..N).rev() {
             let s = &qp.stages[k];
+            let h = qp.h(k);
             let (done, rest) = self.pn.split_at_mut(k);
             let Some(p) = rest.first() else {
                 return false;
@@ -1176,7 +1254,7 @@ impl<
             // Products with A and B on the right, where their zeros are skipped: with P
             // symmetric, B'PB = (PB)'B, A'PB = (PA)'B, A'PA = (PA)'A.
             let pb = mul_sparse(p, &s.b);
-            let mut rbar = s.r;
+            let mut rbar = h.r;
             add_diagonal(
                 &mut rbar,
                 &weights(&self.ru[k], None, active.map(|a| (&a.u[k], a.w))),
@@ -1184,7 +1262,7 @@ impl<
             mul_sparse_add_into(&mut rbar, &pb.transpose(), &s.b);
             // S~' = S' + C' Sigma_g D + A'PB, transposed, so that every product with it
             // runs down its columns.
-            let mut sbt = s.s.transpose();
+            let mut sbt = h.s.transpose();
             let cts = if NG > 0 {
                 let w = weights(
                     &self.rg[k],
@@ -1221,7 +1299,7 @@ impl<
             self.wt[k] = wt;
             if let (Some(pk), Some(atp)) = (done.last_mut(), atp) {
                 // P_k = Q + Sigma_x + C' Sigma_g C + A'PA - W'W.
-                *pk = s.q;
+                *pk = h.q;
                 add_diagonal(
                     pk,
                     &self.rx[k].scatter(&weights(
@@ -1244,7 +1322,11 @@ impl<
     /// Solves the Newton system for the given complementarity right-hand side and sets the
     /// direction of every variable: reduced gradient, Riccati solve, `settings.refine` steps
     /// of iterative refinement, then slack and multiplier directions.
-    fn newton_direction(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N>, rhs: Rhs<T>) {
+    fn newton_direction<const NH: usize>(
+        &mut self,
+        qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>,
+        rhs: Rhs<T>,
+    ) {
         if N == 0 {
             return;
         }
@@ -1285,7 +1367,7 @@ impl<
     /// Riccati solve of the linear-quadratic problem with gradients `gxt`, `gut`, `gnt`, and
     /// dynamics residuals `rbt`, using the factorization of the last [`factorize`] call;
     /// writes `dx`, `du`, `dxn` and `pi_new`.
-    fn lq_solve(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N>) {
+    fn lq_solve<const NH: usize>(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>) {
         // With R~ = L L' and W' = S~'L^-T (`factorize`), the feedforward control
         // -R~^-1 (g~ + B'(P rb + p)) is -L^-T y for y = L^-1 (g~ + B'(P rb + p)), kept in `kv`,
         // and the control is du = K dx - L^-T y = -L^-T (W dx + y).
@@ -1317,26 +1399,27 @@ impl<
     /// direction is computed from the stage data (not from the Riccati matrices, which lose
     /// precision when barrier terms are large), and the correction is solved with the same
     /// factorization.
-    fn refine(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N>) {
+    fn refine<const NH: usize>(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>) {
         let t = &qp.terminal;
         let (dx0, du0, dxn0, pi0) = (self.dx, self.du, self.dxn, self.pi_new);
         // Residuals of H~ d + g~ + [A'; B'] pi_k - [pi_{k-1}; 0] and A dx + B du + rb - dx+.
         for k in 0..N {
             let s = &qp.stages[k];
+            let h = qp.h(k);
             let (dx, du) = (dx0[k], du0[k]);
             let next = if k + 1 < N { dx0[k + 1] } else { dxn0 };
             let wg = self.rg[k]
                 .sigma(Some(&self.sg[k]))
                 .component_mul(&(s.c * dx + s.d * du));
-            self.gut[k] = s.r * du
-                + s.s * dx
+            self.gut[k] = h.r * du
+                + h.s * dx
                 + self.ru[k].sigma(None).component_mul(&du)
                 + tr_mul(&s.d, &wg)
                 + self.gu0[k]
                 + tr_mul(&s.b, &pi0[k]);
             if k > 0 {
-                self.gxt[k] = s.q * dx
-                    + tr_mul(&s.s, &du)
+                self.gxt[k] = h.q * dx
+                    + tr_mul(&h.s, &du)
                     + self.rx[k].sigma().component_mul(&dx)
                     + tr_mul(&s.c, &wg)
                     + self.gx0[k]

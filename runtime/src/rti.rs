@@ -129,7 +129,10 @@ pub enum SetError {
 }
 
 /// A real-time-iteration NMPC solver for model `M` with horizon `N`; `NC`, `NBX` and `NR`
-/// size its QP solver ([`QpSolver`]).
+/// size its QP solver ([`QpSolver`]). `NH` is the number of stage Hessians its QP keeps
+/// ([`OcpQp`]): `N`, or `1` for a model with constant residual Jacobians
+/// ([`Model::CONSTANT_RESIDUAL_JACOBIANS`]), whose Gauss-Newton Hessian `J'WJ` is the same at
+/// every stage (one weight `W` for all). Other values fail to compile.
 #[derive(Clone, Debug)]
 pub struct Rti<
     T: Real,
@@ -145,12 +148,13 @@ pub struct Rti<
     const NC: usize = 0,
     const NBX: usize = NX,
     const NR: usize = N,
+    const NH: usize = N,
 > {
     /// The model.
     pub model: M,
     /// Settings.
     pub settings: RtiSettings<T>,
-    qp: OcpQp<T, NX, NU, NG, NGN, N>,
+    qp: OcpQp<T, NX, NU, NG, NGN, N, NH>,
     solver: QpSolver<T, NX, NU, NG, NGN, N, NC, NBX, NR>,
     x: [SVector<T, NX>; N],
     xn: SVector<T, NX>,
@@ -296,7 +300,8 @@ impl<
     const NC: usize,
     const NBX: usize,
     const NR: usize,
-> Rti<T, M, NX, NU, NP, NY, NYN, NG, NGN, N, NC, NBX, NR>
+    const NH: usize,
+> Rti<T, M, NX, NU, NP, NY, NYN, NG, NGN, N, NC, NBX, NR, NH>
 {
     /// A solver with zero trajectory, parameters, references and weights, no bounds and the
     /// default settings. `const`, so it can initialize a `static`.
@@ -316,6 +321,12 @@ impl<
     }
 
     const fn build(model: M, zero: bool) -> Self {
+        const {
+            assert!(
+                NH == N || (NH == 1 && M::CONSTANT_RESIDUAL_JACOBIANS),
+                "NH = 1 (one stage Hessian) needs a model with constant residual Jacobians"
+            )
+        };
         let (lo, hi) = if zero {
             (T::ZERO, T::ZERO)
         } else {
@@ -556,7 +567,7 @@ impl<
     }
 
     /// The QP of the last preparation (for inspection, export and benchmarks).
-    pub fn qp(&self) -> &OcpQp<T, NX, NU, NG, NGN, N> {
+    pub fn qp(&self) -> &OcpQp<T, NX, NU, NG, NGN, N, NH> {
         &self.qp
     }
 
@@ -618,11 +629,6 @@ impl<
             // controls is mostly zeros), written into the stage in place.
             let wjxt = weighted_transpose(&self.w, self.w_diag, &jx);
             let wjut = weighted_transpose(&self.w, self.w_diag, &ju);
-            if gn {
-                mul_mostly_zero_into(&mut s.q, &wjxt, &jx);
-                mul_mostly_zero_into(&mut s.s, &wjut, &jx);
-                mul_mostly_zero_into(&mut s.r, &wjut, &ju);
-            }
             s.gx = mul(&wjxt, &r);
             s.gu = mul(&wjut, &r);
             s.lbx = self.lbx - x;
@@ -634,6 +640,13 @@ impl<
             s.ug = self.ug - h;
             s.soft_l1 = self.l1;
             s.soft_l2 = self.l2;
+            // One Hessian for all stages (`NH = 1`, constant Jacobians): stage 0's.
+            if gn && (NH == N || k == 0) {
+                let h = self.qp.h_mut(k);
+                mul_mostly_zero_into(&mut h.q, &wjxt, &jx);
+                mul_mostly_zero_into(&mut h.s, &wjut, &jx);
+                mul_mostly_zero_into(&mut h.r, &wjut, &ju);
+            }
         }
         self.linearize_terminal(gn);
         self.gn_current = true;

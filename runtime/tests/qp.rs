@@ -68,9 +68,10 @@ fn polished_error<
     const NC: usize,
     const NBX: usize,
     const NR: usize,
+    const NH: usize,
 >(
     solver: &QpSolver<f64, NX, NU, NG, NGN, N, NC, NBX, NR>,
-    qp: &OcpQp<f64, NX, NU, NG, NGN, N>,
+    qp: &OcpQp<f64, NX, NU, NG, NGN, N, NH>,
     reference: &Reference<NX, NU>,
 ) -> Result<f64, TestCaseError> {
     let mut polished = Box::new(solver.clone());
@@ -127,8 +128,8 @@ macro_rules! f32_against_clarabel {
         fn $name() {
             let (mut judged, mut polished, mut worst) = (0, 0, 0.0f64);
             for seed in (0..400u64).map(|i| 2 * i + 1) {
-                let qp32 = cast_qp::<f64, f32, $nx, $nu, $ng, $ngn, $n>(&random_qp(seed));
-                let qp64 = cast_qp::<f32, f64, $nx, $nu, $ng, $ngn, $n>(&qp32);
+                let qp32 = cast_qp::<f64, f32, $nx, $nu, $ng, $ngn, $n, $n>(&random_qp(seed));
+                let qp64 = cast_qp::<f32, f64, $nx, $nu, $ng, $ngn, $n, $n>(&qp32);
                 let Some(reference) = clarabel_solve(&qp64) else {
                     continue;
                 };
@@ -238,13 +239,16 @@ fn cast_qp<
     const NG: usize,
     const NGN: usize,
     const N: usize,
+    const NH: usize,
 >(
-    qp: &OcpQp<A, NX, NU, NG, NGN, N>,
-) -> OcpQp<B, NX, NU, NG, NGN, N> {
-    let mut out = OcpQp::<B, NX, NU, NG, NGN, N>::NEW;
+    qp: &OcpQp<A, NX, NU, NG, NGN, N, NH>,
+) -> OcpQp<B, NX, NU, NG, NGN, N, NH> {
+    let mut out = OcpQp::<B, NX, NU, NG, NGN, N, NH>::NEW;
     out.x0 = cast_mat(&qp.x0);
+    for (o, h) in out.hessians.iter_mut().zip(&qp.hessians) {
+        (o.q, o.s, o.r) = (cast_mat(&h.q), cast_mat(&h.s), cast_mat(&h.r));
+    }
     for (o, s) in out.stages.iter_mut().zip(&qp.stages) {
-        (o.q, o.s, o.r) = (cast_mat(&s.q), cast_mat(&s.s), cast_mat(&s.r));
         (o.gx, o.gu) = (cast_mat(&s.gx), cast_mat(&s.gu));
         (o.a, o.b, o.f) = (cast_mat(&s.a), cast_mat(&s.b), cast_mat(&s.f));
         (o.lbx, o.ubx) = (cast_mat(&s.lbx), cast_mat(&s.ubx));
@@ -270,8 +274,8 @@ macro_rules! condensed_f32_against_clarabel {
             #![proptest_config(ProptestConfig { cases: 12, ..ProptestConfig::default() })]
             #[test]
             fn $name(seed in any::<u64>()) {
-                let qp32 = cast_qp::<f64, f32, $nx, $nu, 0, 0, $n>(&control_bounded_qp(seed));
-                let reference = clarabel_solve(&cast_qp::<f32, f64, $nx, $nu, 0, 0, $n>(&qp32));
+                let qp32 = cast_qp::<f64, f32, $nx, $nu, 0, 0, $n, $n>(&control_bounded_qp(seed));
+                let reference = clarabel_solve(&cast_qp::<f32, f64, $nx, $nu, 0, 0, $n, $n>(&qp32));
                 prop_assume!(reference.is_some(), "clarabel found no reference solution");
                 let reference = reference.unwrap();
                 prop_assume!(reference.strict_complementarity > 1e-3, "nearly degenerate solution");
@@ -436,8 +440,8 @@ fn soft_random_qps_have_active_slacks() {
 /// soft upper bound `u <= ug + su`, `ug = 1`, solved in precision `T`.
 fn scalar_soft<T: mpc_runtime::Real>(l1: f64, l2: f64) -> (f64, f64, mpc_runtime::QpInfo<T>) {
     let mut qp = OcpQp::<T, 1, 1, 1, 0, 1>::NEW;
+    qp.hessians[0].r[(0, 0)] = T::lit(2.0);
     let s = &mut qp.stages[0];
-    s.r[(0, 0)] = T::lit(2.0);
     s.gu[0] = T::lit(-6.0);
     s.b[(0, 0)] = T::ONE;
     s.d[(0, 0)] = T::ONE;
@@ -472,8 +476,8 @@ fn soft_l2_matches_the_closed_form_minimizer() {
 #[test]
 fn soft_l2_inactive_has_zero_slack() {
     let mut qp = OcpQp::<f64, 1, 1, 1, 0, 1>::NEW;
+    qp.hessians[0].r[(0, 0)] = 2.0;
     let s = &mut qp.stages[0];
-    s.r[(0, 0)] = 2.0;
     s.gu[0] = 6.0;
     s.d[(0, 0)] = 1.0;
     s.ug[0] = 1.0;
@@ -516,11 +520,11 @@ fn soft_l1_is_an_exact_penalty() {
 fn contradictory_soft_constraints_are_absorbed_by_slacks() {
     let build = |l1: f64, l2: f64| {
         let mut qp = OcpQp::<f64, 1, 1, 1, 1, 3>::NEW;
-        for s in qp.stages.iter_mut() {
+        for (s, h) in qp.stages.iter_mut().zip(&mut qp.hessians) {
             s.a[(0, 0)] = 1.0;
             s.b[(0, 0)] = 1.0;
-            s.q[(0, 0)] = 1.0;
-            s.r[(0, 0)] = 1.0;
+            h.q[(0, 0)] = 1.0;
+            h.r[(0, 0)] = 1.0;
             s.lbu[0] = 0.0;
             s.ubu[0] = 1.0;
         }
@@ -610,20 +614,31 @@ fn lqr_first_control_matches_dare() {
     let k_lqr = (r + b.transpose() * p * b).try_inverse().unwrap() * b.transpose() * p * a;
     let mut qp = OcpQp::<f64, NX, NU, 0, 0, N>::NEW;
     qp.x0 = rng.vec(1.0);
-    for s in qp.stages.iter_mut() {
-        s.q = q;
-        s.r = r;
-        s.a = a;
-        s.b = b;
+    for (s, h) in qp.stages.iter_mut().zip(&mut qp.hessians) {
+        (h.q, h.r) = (q, r);
+        (s.a, s.b) = (a, b);
     }
     qp.terminal.q = p;
+    // The same QP with one Hessian for all stages (`NH = 1`), as a time-invariant cost is.
+    let mut shared = OcpQp::<f64, NX, NU, 0, 0, N, 1>::NEW;
+    (shared.x0, shared.stages, shared.terminal) = (qp.x0, qp.stages, qp.terminal);
+    (shared.hessians[0].q, shared.hessians[0].r) = (q, r);
+    let want = -k_lqr * qp.x0;
     let mut solver = QpSolver::<f64, NX, NU, 0, 0, N>::NEW;
     solver.settings.tol_stat = 1e-10;
-    let info = solver.solve(&qp);
-    assert_eq!(info.status, QpStatus::Solved);
-    let u0 = solver.solution().u[0];
-    let want = -k_lqr * qp.x0;
-    assert!((u0 - want).amax() <= 1e-9, "u0 {u0} vs LQR {want}");
+    for one_hessian in [false, true] {
+        let info = if one_hessian {
+            solver.solve(&shared)
+        } else {
+            solver.solve(&qp)
+        };
+        assert_eq!(info.status, QpStatus::Solved);
+        let u0 = solver.solution().u[0];
+        assert!(
+            (u0 - want).amax() <= 1e-9,
+            "u0 {u0} vs LQR {want} ({one_hessian})"
+        );
+    }
 }
 
 #[test]
@@ -642,11 +657,11 @@ fn crossed_bounds_are_infeasible_at_once() {
 #[test]
 fn contradictory_constraints_are_detected_in_bounded_iterations() {
     let mut qp = OcpQp::<f64, 1, 1, 0, 0, 3>::NEW;
-    for s in qp.stages.iter_mut() {
+    for (s, h) in qp.stages.iter_mut().zip(&mut qp.hessians) {
         s.a[(0, 0)] = 1.0;
         s.b[(0, 0)] = 1.0;
-        s.q[(0, 0)] = 1.0;
-        s.r[(0, 0)] = 1.0;
+        h.q[(0, 0)] = 1.0;
+        h.r[(0, 0)] = 1.0;
         s.lbu[0] = 0.0;
         s.ubu[0] = 1.0;
     }
@@ -973,4 +988,76 @@ fn a_solver_without_riccati_storage_condenses_every_qp() {
         saved >= riccati + rows,
         "{saved} B saved, {riccati} + {rows} expected"
     );
+}
+
+/// `qp` with every stage's Hessian set to stage 0's, and the same QP with that one Hessian
+/// for all stages (`NH = 1`).
+fn one_hessian<
+    const NX: usize,
+    const NU: usize,
+    const NG: usize,
+    const NGN: usize,
+    const N: usize,
+>(
+    mut qp: OcpQp<f64, NX, NU, NG, NGN, N>,
+) -> (
+    OcpQp<f64, NX, NU, NG, NGN, N>,
+    OcpQp<f64, NX, NU, NG, NGN, N, 1>,
+) {
+    let h = qp.hessians[0];
+    qp.hessians = [h; N];
+    let mut shared = OcpQp::<f64, NX, NU, NG, NGN, N, 1>::NEW;
+    (shared.x0, shared.stages, shared.terminal) = (qp.x0, qp.stages, qp.terminal);
+    shared.hessians = [h];
+    (qp, shared)
+}
+
+/// A QP whose stages share one Hessian (`NH = 1`) matches clarabel, and solves bit for bit as
+/// the same QP with a copy of that Hessian per stage, with general constraints and state
+/// bounds (Riccati, the polish too) and condensed (after `prepare` and without); its data is
+/// smaller by `N - 1` Hessians.
+#[test]
+fn one_hessian_for_every_stage_solves_as_a_copy_per_stage() {
+    let mut judged = 0;
+    for seed in 0..12u64 {
+        let (copies, shared) = one_hessian(random_qp::<6, 3, 1, 1, 12>(seed));
+        let Some(reference) = clarabel_solve(&shared) else {
+            continue;
+        };
+        let mut solver = Box::new(QpSolver::<f64, 6, 3, 1, 1, 12>::NEW);
+        solver.settings.tol_stat = 1e-10;
+        solver.settings.tol_comp = 1e-12;
+        let mut copy_solver = solver.clone();
+        let info = solver.solve(&shared);
+        let err = solved_error(&info, &solver.settings, solver.solution(), &reference).unwrap();
+        assert!(err <= 1e-7, "seed {seed}: differs from clarabel by {err:e}");
+        if reference.strict_complementarity > 1e-3 {
+            let err = polished_error(&solver, &shared, &reference).unwrap();
+            assert!(err <= 1e-7, "seed {seed}: polished, {err:e} from clarabel");
+        }
+        assert_eq!(copy_solver.solve(&copies), info, "seed {seed}");
+        assert_eq!(
+            plan_of(copy_solver.solution()),
+            plan_of(solver.solution()),
+            "seed {seed}"
+        );
+        judged += 1;
+    }
+    assert!(judged >= 8, "only {judged} draws judged");
+    for seed in [2u64, 11, 23] {
+        let (copies, shared) = one_hessian(control_bounded_qp::<4, 2, 8>(seed));
+        let mut dense = Box::new(QpSolver::<f64, 4, 2, 0, 0, 8, 8, 0, 0>::NEW);
+        let mut copy_dense = dense.clone();
+        let reference = copy_dense.solve(&copies);
+        assert_eq!(reference.status, QpStatus::Solved, "seed {seed}");
+        assert_eq!(dense.solve(&shared), reference, "seed {seed}");
+        let expected = plan_of(copy_dense.solution());
+        assert_eq!(plan_of(dense.solution()), expected, "seed {seed}");
+        let mut unprepared = Box::new(QpSolver::<f64, 4, 2, 0, 0, 8, 8, 0, 0>::NEW);
+        assert_eq!(unprepared.solve_prepared(&shared), reference, "seed {seed}");
+        assert_eq!(plan_of(unprepared.solution()), expected, "seed {seed}");
+    }
+    let saved = core::mem::size_of::<OcpQp<f64, 6, 3, 1, 1, 12>>()
+        - core::mem::size_of::<OcpQp<f64, 6, 3, 1, 1, 12, 1>>();
+    assert_eq!(saved, 11 * (6 * 6 + 3 * 6 + 3 * 3) * 8);
 }

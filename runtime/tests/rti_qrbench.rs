@@ -190,10 +190,11 @@ fn gauss_newton_terms_match_j_w_j_for_diagonal_and_dense_weights() {
         let yref =
             SVector::<f64, NY>::from_fn(|i, _| if i < NX { X_REF[i] } else { U_REF[i - NX] });
         let st = &s.qp().stages[3];
+        let h = &s.qp().hessians[3];
         let tol = 1e-9 * w.amax() * 100.0;
-        assert!((st.q - jx.transpose() * w * jx).amax() < tol);
-        assert!((st.s - ju.transpose() * w * jx).amax() < tol);
-        assert!((st.r - ju.transpose() * w * ju).amax() < tol);
+        assert!((h.q - jx.transpose() * w * jx).amax() < tol);
+        assert!((h.s - ju.transpose() * w * jx).amax() < tol);
+        assert!((h.r - ju.transpose() * w * ju).amax() < tol);
         assert!((st.gx - jx.transpose() * w * (y - yref)).amax() < tol * 10.0);
         assert!((st.gu - ju.transpose() * w * (y - yref)).amax() < tol * 10.0);
     }
@@ -203,12 +204,14 @@ fn gauss_newton_terms_match_j_w_j_for_diagonal_and_dense_weights() {
 /// linearizations) flies the same closed loop bit for bit as the same model without the
 /// declaration, through weight changes: every QP has the same Hessians, and after a
 /// `set_weights` they are the new weights' `J'WJ`, not the old ones kept (and after a
-/// `set_weights` with the same weights, still theirs).
+/// `set_weights` with the same weights, still theirs). So does the model with one Hessian
+/// for all stages in its QP (`NH = 1`): that Hessian is every stage's of the others.
 #[test]
 fn constant_residual_jacobians_keep_j_w_j_until_the_weights_change() {
-    use support::quadrotor::qrbench_constant_jacobians;
+    use support::quadrotor::{qrbench_constant_jacobians, qrbench_one_hessian};
     let dt = 0.05;
     let (mut a, mut b) = (qrbench::<20>(dt), qrbench_constant_jacobians::<20>(dt));
+    let mut c = qrbench_one_hessian::<20>(dt);
     let mut x = SVector::<f64, NX>::from(X0);
     let mut weights = (
         nalgebra::SMatrix::<f64, 14, 14>::zeros(),
@@ -221,6 +224,7 @@ fn constant_residual_jacobians_keep_j_w_j_until_the_weights_change() {
             let (w, wn) = (weights.0, weights.1);
             a.set_weights(&w, &wn).unwrap();
             b.set_weights(&w, &wn).unwrap();
+            c.set_weights(&w, &wn).unwrap();
         }
         if k == 15 || k == 30 {
             // Heavier position weights, then a dense coupling (the product path).
@@ -240,21 +244,28 @@ fn constant_residual_jacobians_keep_j_w_j_until_the_weights_change() {
             let wn = nalgebra::SMatrix::<f64, NX, NX>::identity() * (50.0 * scale);
             a.set_weights(&w, &wn).unwrap();
             b.set_weights(&w, &wn).unwrap();
+            c.set_weights(&w, &wn).unwrap();
             weights = (w, wn);
         }
         a.prepare();
         b.prepare();
-        for (sa, sb) in a.qp().stages.iter().zip(&b.qp().stages) {
-            assert_eq!((sa.q, sa.s, sa.r), (sb.q, sb.s, sb.r), "step {k}");
+        c.prepare();
+        let hc = &c.qp().hessians[0];
+        for (ha, hb) in a.qp().hessians.iter().zip(&b.qp().hessians) {
+            assert_eq!((ha.q, ha.s, ha.r), (hb.q, hb.s, hb.r), "step {k}");
+            assert_eq!((ha.q, ha.s, ha.r), (hc.q, hc.s, hc.r), "step {k}");
         }
         assert_eq!(a.qp().terminal.q, b.qp().terminal.q, "step {k}");
+        assert_eq!(a.qp().terminal.q, c.qp().terminal.q, "step {k}");
         let (ua, ia) = a.feedback(&x);
         let (ub, ib) = b.feedback(&x);
+        let (uc, ic) = c.feedback(&x);
         assert_eq!(ia.status, RtiStatus::Ok, "step {k}");
         assert_eq!((ua, ia), (ub, ib), "step {k}");
+        assert_eq!((ua, ia), (uc, ic), "step {k}");
         x = plant(&x, &ua, dt, 10);
     }
-    assert_eq!(a.qp().stages[7].q[(0, 1)], 5.0, "the last weights' J'WJ");
+    assert_eq!(a.qp().hessians[7].q[(0, 1)], 5.0, "the last weights' J'WJ");
 }
 
 /// `Rti::unconfigured` (every field zero, so that a `static` of it is zero-filled memory)

@@ -52,7 +52,10 @@ impl<
 {
     /// Whether the next solve of `qp` condenses: storage for it (`NC = N`), the method (any,
     /// without Riccati storage), and no inequality other than control bounds.
-    pub(super) fn condensing_applies(&self, qp: &OcpQp<T, NX, NU, NG, NGN, N>) -> bool {
+    pub(super) fn condensing_applies<const NH: usize>(
+        &self,
+        qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>,
+    ) -> bool {
         if NC != N || N == 0 {
             return false;
         }
@@ -81,7 +84,10 @@ impl<
 
     /// Builds `H` (on and above the diagonal of `tri`), `gc`, `xc` (module docs). Returns
     /// `false` (and the Riccati recursion is used) if `NC != N`.
-    pub(super) fn condense(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N>) -> bool {
+    pub(super) fn condense<const NH: usize>(
+        &mut self,
+        qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>,
+    ) -> bool {
         if NC != N {
             return false;
         }
@@ -94,10 +100,11 @@ impl<
             let Some(s) = qp.stages.get(k) else {
                 return false;
             };
+            let h = qp.h(k);
             let pb = mul_sparse(&p, &s.b);
             let pbt = pb.transpose();
             let pf = pv + mul(&p, &s.f);
-            self.tri[k][k] = s.r + mul_sparse(&pbt, &s.b);
+            self.tri[k][k] = h.r + mul_sparse(&pbt, &s.b);
             for j in k + 1..NC {
                 mul_sparse_into(&mut self.tri[k][j], &self.xc[j], &s.b);
                 self.gc[j] += mul(&self.xc[j], &s.f);
@@ -105,12 +112,12 @@ impl<
                 mul_sparse_into(&mut self.xc[j], &x, &s.a);
             }
             self.gc[k] = s.gu + tr_mul(&s.b, &pf);
-            self.xc[k] = s.s + mul_sparse(&pbt, &s.a);
+            self.xc[k] = h.s + mul_sparse(&pbt, &s.a);
             if k > 0 {
                 pv = s.gx + tr_mul(&s.a, &pf);
                 let pat = mul_sparse(&p, &s.a).transpose();
                 mul_sparse_into(&mut p, &pat, &s.a);
-                p += s.q;
+                p += h.q;
                 symmetrize(&mut p);
             }
         }
@@ -118,7 +125,10 @@ impl<
     }
 
     /// The condensed gradient at this `x0`, into `gu0`.
-    pub(super) fn condensed_gradient(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N>) {
+    pub(super) fn condensed_gradient<const NH: usize>(
+        &mut self,
+        qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>,
+    ) {
         for k in 0..NC.min(N) {
             self.gu0[k] = self.gc[k] + mul(&self.xc[k], &qp.x0);
         }
@@ -378,7 +388,7 @@ impl<
 
     /// States from the dynamics and dynamics multipliers from the state stationarity
     /// conditions, for the controls of the condensed solve.
-    pub(super) fn expand(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N>) {
+    pub(super) fn expand<const NH: usize>(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>) {
         let mut x = qp.x0;
         for k in 0..N {
             let s = &qp.stages[k];
@@ -392,8 +402,9 @@ impl<
             self.sol.pi[k] = pi;
             if k > 0 {
                 let s = &qp.stages[k];
+                let h = qp.h(k);
                 let (xk, uk) = (&self.sol.x[k], &self.sol.u[k]);
-                pi = mul(&s.q, xk) + tr_mul(&s.s, uk) + s.gx + tr_mul(&s.a, &pi);
+                pi = mul(&h.q, xk) + tr_mul(&h.s, uk) + s.gx + tr_mul(&s.a, &pi);
             }
         }
     }

@@ -324,7 +324,10 @@ impl<
     /// residuals and its largest bound violation.
     // Not inlined: its arrays stay out of the stack frame of a solve that does not polish.
     #[inline(never)]
-    pub(super) fn riccati_polish(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N>) -> Option<[T; 3]> {
+    pub(super) fn riccati_polish<const NH: usize>(
+        &mut self,
+        qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>,
+    ) -> Option<[T; 3]> {
         if N == 0 || self.sg.iter().any(|s| s.any) || self.sgn.any {
             return None;
         }
@@ -400,7 +403,7 @@ impl<
     }
 
     /// The largest violation of a bound or general-constraint side at the current point.
-    fn bound_violation(&self, qp: &OcpQp<T, NX, NU, NG, NGN, N>) -> T {
+    fn bound_violation<const NH: usize>(&self, qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>) -> T {
         let mut m = T::ZERO;
         for k in 0..N {
             let s = &qp.stages[k];
@@ -418,9 +421,9 @@ impl<
     /// The ratio test of the primal active-set method: over every free row, the step from
     /// `cur` to the solution in `sol` at which the first row the solution violates becomes
     /// active, and that row.
-    fn blocking(
+    fn blocking<const NH: usize>(
         &self,
-        qp: &OcpQp<T, NX, NU, NG, NGN, N>,
+        qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>,
         cur: &QpSolution<T, NX, NU, N>,
         act: &ActiveSet<T, NBX, NU, NG, NGN, N>,
         tol: T,
@@ -482,9 +485,9 @@ impl<
     /// (stationarity, dynamics, the active rows' distance to their bounds) are below a
     /// hundredth of the tolerances (checked after every other step: a check costs about
     /// half a step).
-    fn refine_on(
+    fn refine_on<const NH: usize>(
         &mut self,
-        qp: &OcpQp<T, NX, NU, NG, NGN, N>,
+        qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>,
         act: &ActiveSet<T, NBX, NU, NG, NGN, N>,
         y: &mut Duals<T, NBX, NU, NG, NGN, N>,
         steps: usize,
@@ -506,9 +509,9 @@ impl<
     }
 
     /// The largest distance of an active row from its bound.
-    fn active_gap(
+    fn active_gap<const NH: usize>(
         &self,
-        qp: &OcpQp<T, NX, NU, NG, NGN, N>,
+        qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>,
         act: &ActiveSet<T, NBX, NU, NG, NGN, N>,
     ) -> T {
         let mut m = T::ZERO;
@@ -528,9 +531,9 @@ impl<
     /// One refinement step: the residuals of the active-set QP's KKT system at the current
     /// point, the Riccati solve of the regularized system for the correction, and the
     /// update of states, controls, dynamics multipliers and the active rows' multipliers.
-    fn polish_step(
+    fn polish_step<const NH: usize>(
         &mut self,
-        qp: &OcpQp<T, NX, NU, NG, NGN, N>,
+        qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>,
         act: &ActiveSet<T, NBX, NU, NG, NGN, N>,
         y: &mut Duals<T, NBX, NU, NG, NGN, N>,
     ) {
@@ -540,6 +543,7 @@ impl<
         let mut wr = Duals::<T, NBX, NU, NG, NGN, N>::ZERO;
         for k in 0..N {
             let s = &qp.stages[k];
+            let h = qp.h(k);
             let (x, u) = (self.sol.x[k], self.sol.u[k]);
             let xnext = if k + 1 < N {
                 self.sol.x[k + 1]
@@ -553,10 +557,10 @@ impl<
             let tg = wr.g[k] - y.g[k];
             let pi = self.sol.pi[k];
             self.gut[k] =
-                s.r * u + s.s * x + s.gu + wr.u[k] - y.u[k] + tr_mul(&s.d, &tg) + tr_mul(&s.b, &pi);
+                h.r * u + h.s * x + s.gu + wr.u[k] - y.u[k] + tr_mul(&s.d, &tg) + tr_mul(&s.b, &pi);
             if k > 0 {
                 let rx = &self.rx[k];
-                self.gxt[k] = s.q * x + tr_mul(&s.s, &u) + s.gx + rx.scatter(&wr.x[k])
+                self.gxt[k] = h.q * x + tr_mul(&h.s, &u) + s.gx + rx.scatter(&wr.x[k])
                     - rx.scatter(&y.x[k])
                     + tr_mul(&s.c, &tg)
                     + tr_mul(&s.a, &pi)
@@ -597,9 +601,9 @@ impl<
     }
 
     /// [`update_sides`] over every row set: the largest disagreement and whether a row moved.
-    fn move_rows(
+    fn move_rows<const NH: usize>(
         &self,
-        qp: &OcpQp<T, NX, NU, NG, NGN, N>,
+        qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>,
         act: &mut ActiveSet<T, NBX, NU, NG, NGN, N>,
         y: &mut Duals<T, NBX, NU, NG, NGN, N>,
         tol: T,
@@ -662,14 +666,15 @@ impl<
 
     /// Stationarity (relative to its largest term when that exceeds 1, as in the interior
     /// point's residuals) and dynamics residual of the active-set QP at the current point.
-    fn polish_residuals(
+    fn polish_residuals<const NH: usize>(
         &self,
-        qp: &OcpQp<T, NX, NU, NG, NGN, N>,
+        qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>,
         y: &Duals<T, NBX, NU, NG, NGN, N>,
     ) -> (T, T) {
         let (mut rs, mut re, mut scale) = (T::ZERO, T::ZERO, T::ONE);
         for k in 0..N {
             let s = &qp.stages[k];
+            let h = qp.h(k);
             let (x, u, pi) = (self.sol.x[k], self.sol.u[k], self.sol.pi[k]);
             let xnext = if k + 1 < N {
                 self.sol.x[k + 1]
@@ -677,7 +682,7 @@ impl<
                 self.sol.xn
             };
             re = re.max((s.a * x + s.b * u + s.f - xnext).amax());
-            let hu = s.r * u + s.s * x + s.gu;
+            let hu = h.r * u + h.s * x + s.gu;
             let (bpi, dy) = (tr_mul(&s.b, &pi), tr_mul(&s.d, &y.g[k]));
             rs = rs.max((hu + bpi - y.u[k] - dy).amax());
             scale = scale
@@ -686,7 +691,7 @@ impl<
                 .max(y.u[k].amax())
                 .max(dy.amax());
             if k > 0 {
-                let hx = s.q * x + tr_mul(&s.s, &u) + s.gx;
+                let hx = h.q * x + tr_mul(&h.s, &u) + s.gx;
                 let (api, cy) = (tr_mul(&s.a, &pi), tr_mul(&s.c, &y.g[k]));
                 let prev = self.sol.pi[k - 1];
                 let yx = self.rx[k].scatter(&y.x[k]);

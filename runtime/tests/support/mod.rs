@@ -77,21 +77,21 @@ pub fn random_qp_with_witness<
     qp.x0 = rng.vec(1.0);
     let mut x = qp.x0;
     for k in 0..N {
-        let s = &mut qp.stages[k];
+        let (s, h) = (&mut qp.stages[k], &mut qp.hessians[k]);
         // A convex stage Hessian [Q S'; S R] = M'M + diag(eps), split into blocks; 30 % of the
         // stages have no state cost at all (singular Hessians happen, e.g. no cost on a state).
         if rng.chance(0.3) {
-            s.q = SMatrix::zeros();
-            s.s = SMatrix::zeros();
-            s.r = psd(&mut rng, 0.1);
+            h.q = SMatrix::zeros();
+            h.s = SMatrix::zeros();
+            h.r = psd(&mut rng, 0.1);
         } else {
             let m: SMatrix<f64, NU, NU> = rng.mat(1.0);
             let mx: SMatrix<f64, NX, NX> = rng.mat(1.0);
             let coupling: SMatrix<f64, NX, NU> = rng.mat(0.3);
             // rows [mx coupling; 0 m]: H = [mx'mx, mx'coupling; coupling'mx, coupling'coupling + m'm]
-            s.q = mx.transpose() * mx + SMatrix::<f64, NX, NX>::identity() * 1e-2;
-            s.s = coupling.transpose() * mx;
-            s.r = coupling.transpose() * coupling
+            h.q = mx.transpose() * mx + SMatrix::<f64, NX, NX>::identity() * 1e-2;
+            h.s = coupling.transpose() * mx;
+            h.r = coupling.transpose() * coupling
                 + m.transpose() * m
                 + SMatrix::<f64, NU, NU>::identity() * 0.1;
         }
@@ -231,8 +231,9 @@ pub fn dense<
     const NG: usize,
     const NGN: usize,
     const N: usize,
+    const NH: usize,
 >(
-    qp: &OcpQp<f64, NX, NU, NG, NGN, N>,
+    qp: &OcpQp<f64, NX, NU, NG, NGN, N, NH>,
 ) -> Dense {
     // Offsets: u_k at uo(k), x_k (k >= 1) at xo(k).
     let uo = |k: usize| {
@@ -337,28 +338,29 @@ pub fn dense<
         };
     for k in 0..N {
         let s = &qp.stages[k];
+        let h = qp.hessian(k).expect("a Hessian for every stage");
         for i in 0..NU {
             for j in 0..NU {
-                p[uo(k) + i][uo(k) + j] += s.r[(i, j)];
+                p[uo(k) + i][uo(k) + j] += h.r[(i, j)];
             }
             q[uo(k) + i] += s.gu[i];
         }
         if k == 0 {
-            let sx = s.s * qp.x0;
+            let sx = h.s * qp.x0;
             for i in 0..NU {
                 q[uo(0) + i] += sx[i];
             }
         } else {
             for i in 0..NX {
                 for j in 0..NX {
-                    p[xo(k) + i][xo(k) + j] += s.q[(i, j)];
+                    p[xo(k) + i][xo(k) + j] += h.q[(i, j)];
                 }
                 q[xo(k) + i] += s.gx[i];
             }
             for i in 0..NU {
                 for j in 0..NX {
-                    p[uo(k) + i][xo(k) + j] += s.s[(i, j)];
-                    p[xo(k) + j][uo(k) + i] += s.s[(i, j)];
+                    p[uo(k) + i][xo(k) + j] += h.s[(i, j)];
+                    p[xo(k) + j][uo(k) + i] += h.s[(i, j)];
                 }
             }
         }
@@ -461,8 +463,9 @@ pub fn clarabel_solve<
     const NG: usize,
     const NGN: usize,
     const N: usize,
+    const NH: usize,
 >(
-    qp: &OcpQp<f64, NX, NU, NG, NGN, N>,
+    qp: &OcpQp<f64, NX, NU, NG, NGN, N, NH>,
 ) -> Option<Reference<NX, NU>> {
     let d = dense(qp);
     let p = CscMatrix::from(&d.p).to_triu();

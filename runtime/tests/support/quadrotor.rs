@@ -175,8 +175,13 @@ pub const U_HI: [f64; NU] = [20.0, 20.0, 20.0, 6.0];
 
 /// The RTI solver of QR-bench with horizon `N`, in precision `T`; `NC = N` gives it storage
 /// for condensing (`NC = 0`: the Riccati recursion only).
-pub type QrSolver<T, const N: usize, const NC: usize = 0, const CONST_J: bool = false> =
-    Rti<T, Quadrotor<T, CONST_J>, NX, NU, 0, NY, NX, 0, 0, N, NC>;
+pub type QrSolver<
+    T,
+    const N: usize,
+    const NC: usize = 0,
+    const CONST_J: bool = false,
+    const NH: usize = N,
+> = Rti<T, Quadrotor<T, CONST_J>, NX, NU, 0, NY, NX, 0, 0, N, NC, NX, N, NH>;
 
 /// A QR-bench solver in `f64` (Riccati recursion); see [`qrbench_in`].
 pub fn qrbench<const N: usize>(dt: f64) -> Box<QrSolver<f64, N>> {
@@ -211,8 +216,15 @@ pub fn qrbench_constant_jacobians<const N: usize>(dt: f64) -> Box<QrSolver<f64, 
     s
 }
 
-fn configure<T: Real, const N: usize, const NC: usize, const CONST_J: bool>(
-    s: &mut QrSolver<T, N, NC, CONST_J>,
+/// [`qrbench_constant_jacobians`] with one Hessian for all stages in its QP (`NH = 1`).
+pub fn qrbench_one_hessian<const N: usize>(dt: f64) -> Box<QrSolver<f64, N, 0, true, 1>> {
+    let mut s = Box::new(QrSolver::<f64, N, 0, true, 1>::new(Quadrotor { dt }));
+    configure(&mut s);
+    s
+}
+
+fn configure<T: Real, const N: usize, const NC: usize, const CONST_J: bool, const NH: usize>(
+    s: &mut QrSolver<T, N, NC, CONST_J, NH>,
 ) {
     let c = |v: f64| T::lit(v);
     let mut w = SMatrix::<T, NY, NY>::zeros();

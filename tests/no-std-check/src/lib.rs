@@ -74,10 +74,11 @@ pub fn solve_qp_state_slots_f64(
     s.solve(qp)
 }
 
-/// Solves a QP condensed, without Riccati storage (`NBX = 0`, `NR = 0`).
+/// Solves a QP with one stage Hessian (`NH = 1`) condensed, without Riccati storage
+/// (`NBX = 0`, `NR = 0`).
 pub fn solve_qp_dense_f32(
     s: &mut QpSolver<f32, 10, 4, 0, 0, 10, 10, 0, 0>,
-    qp: &OcpQp<f32, 10, 4, 0, 0, 10>,
+    qp: &OcpQp<f32, 10, 4, 0, 0, 10, 1>,
 ) -> QpInfo<f32> {
     s.solve(qp)
 }
