@@ -774,6 +774,8 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
     let (nbx_raw, nr_raw) = bound_rows_and_riccati(l, nc_raw);
     let (nbx, nr) = (ul(nbx_raw), ul(nr_raw));
     let constant_jacobians = l.constant_residual_jacobians;
+    // One stage Hessian in the QP when `J'WJ` is the same at every stage.
+    let nh = if constant_jacobians { ul(1) } else { n.clone() };
     let model_name = &l.name;
     let solver_doc = doc_lines(&format!(
         "The NMPC solver of `{model_name}`: horizon {n}, {} s per interval, one real-time \
@@ -819,6 +821,9 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
         /// QP (`NC = N`, no state bounds, no general constraints), which then has no Riccati
         /// recursion (and ignores a `QpMethod::Riccati` setting).
         pub const NR: usize = #nr;
+        /// Stage Hessians in the QP: `1` when the residual Jacobians are constants (the
+        /// Gauss-Newton Hessian `J'WJ` is then the same at every stage), `N` otherwise.
+        pub const NH: usize = #nh;
         /// Interval length in seconds.
         pub const DT: Real = #dt;
 
@@ -977,7 +982,7 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
 
         /// The runtime solver this crate instantiates.
         pub type Rti =
-            mpc_runtime::Rti<Real, Model, NX, NU, NP, NY, NYN, NG, NGN, N, NC, NBX, NR>;
+            mpc_runtime::Rti<Real, Model, NX, NU, NP, NY, NYN, NG, NGN, N, NC, NBX, NR, NH>;
 
         const P_ZERO: SVector<Real, NP> =
             SVector::from_array_storage(mpc_runtime::nalgebra::ArrayStorage([[0.0; NP]]));

@@ -133,32 +133,47 @@ fn lib_rs(g: &GeneratedCrate) -> &str {
 /// `Condensed` forces it, `Riccati` removes it. The state-bound rows (`NBX`) are the states
 /// with a bound in the model file (the point mass bounds its 3 accelerations), and a solver
 /// that condenses and has nothing but control bounds has no Riccati storage (`NR = 0`); the
-/// probe model's general constraints (its soft floor) keep it (`NR = N`) even condensed.
+/// probe model's general constraints (its soft floor) keep it (`NR = N`) even condensed. The
+/// QP has one stage Hessian (`NH = 1`) where every residual is linear in the model file (`x -
+/// xref`, `u - uref`: QR-bench and the point mass), one per stage for the probe, whose
+/// terminal residual (the probe's velocity) is not.
 #[test]
 fn condensing_storage_follows_the_method_and_the_model() {
     let rates = "models/quadrotor_rates.mpc";
     let (condensed, riccati) = (Some(QpMethod::Condensed), Some(QpMethod::Riccati));
     let cases = [
-        (rates, Some("A"), None, ["10", "0", "0"], None),
-        (rates, None, None, ["0", "0", "20"], None),
+        (rates, Some("A"), None, ["10", "0", "0", "1"], None),
+        (rates, None, None, ["0", "0", "20", "1"], None),
         (
             "models/paper_pointmass.mpc",
             None,
             None,
-            ["0", "3", "10"],
+            ["0", "3", "10", "1"],
             None,
         ),
-        (rates, None, condensed, ["20", "0", "0"], Some("Condensed")),
-        (rates, Some("A"), riccati, ["0", "0", "10"], Some("Riccati")),
+        (
+            rates,
+            None,
+            condensed,
+            ["20", "0", "0", "1"],
+            Some("Condensed"),
+        ),
+        (
+            rates,
+            Some("A"),
+            riccati,
+            ["0", "0", "10", "1"],
+            Some("Riccati"),
+        ),
         (
             "models/quadrotor_probe.mpc",
             None,
             condensed,
-            ["20", "0", "20"],
+            ["20", "0", "20", "20"],
             Some("Condensed"),
         ),
     ];
-    for (file, variant, method, [nc, nbx, nr], set) in cases {
+    for (file, variant, method, [nc, nbx, nr, nh], set) in cases {
         let opts = Options {
             qp: QpOptions {
                 method,
@@ -169,7 +184,7 @@ fn condensing_storage_follows_the_method_and_the_model() {
         let g = regenerate(file, variant, &opts);
         let lib = lib_rs(&g);
         let what = format!("{file} {variant:?} {method:?}");
-        for (name, value) in [("NC", nc), ("NBX", nbx), ("NR", nr)] {
+        for (name, value) in [("NC", nc), ("NBX", nbx), ("NR", nr), ("NH", nh)] {
             assert!(
                 lib.contains(&format!("pub const {name}: usize = {value};")),
                 "{what}: {name} = {value}"
@@ -177,7 +192,7 @@ fn condensing_storage_follows_the_method_and_the_model() {
         }
         let flat: String = lib.split_whitespace().collect();
         assert!(
-            flat.contains("Rti<Real,Model,NX,NU,NP,NY,NYN,NG,NGN,N,NC,NBX,NR,>"),
+            flat.contains("Rti<Real,Model,NX,NU,NP,NY,NYN,NG,NGN,N,NC,NBX,NR,NH,>"),
             "{what}"
         );
         let line = |m: &str| format!("s.qp.method = mpc_runtime::QpMethod::{m};");
