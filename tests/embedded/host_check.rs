@@ -136,6 +136,31 @@ fn parse(out: &str, machine: &str) -> Report {
             .any(|l| l.starts_with("solver:") && l.ends_with(" in .bss")),
         "{machine}: the solver is not in .bss:\n{out}"
     );
+    // RAM: the static sections hold the solver; the total is statics plus the stack mark.
+    let ram = out
+        .lines()
+        .find(|l| l.starts_with("ram:"))
+        .unwrap_or_else(|| panic!("{machine}: no ram line:\n{out}"));
+    let bytes = |key: &str| -> usize {
+        field(ram, key)
+            .and_then(|v| v.parse().ok())
+            .unwrap_or_else(|| panic!("{machine}: no {key} in {ram}"))
+    };
+    let solver: usize = out
+        .lines()
+        .find_map(|l| l.strip_prefix("solver: "))
+        .and_then(|l| l.split_whitespace().next())
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("{machine}: no solver size:\n{out}"));
+    assert!(
+        bytes("static") >= solver,
+        "{machine}: the static RAM is smaller than the {solver}-byte solver: {ram}"
+    );
+    assert_eq!(
+        bytes("total"),
+        bytes("static") + bytes("stack"),
+        "{machine}: {ram}"
+    );
     let mut iterations = Vec::new();
     for (k, line) in out.lines().filter(|l| l.starts_with("step ")).enumerate() {
         assert_eq!(

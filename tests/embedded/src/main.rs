@@ -57,6 +57,8 @@ unsafe extern "C" {
     // copied from flash.
     static __sbss: u32;
     static __ebss: u32;
+    // The start of .data, the first section in RAM.
+    static __sdata: u32;
 }
 
 fn stack_bounds() -> (usize, usize) {
@@ -245,6 +247,15 @@ fn main() -> ! {
         stack_prepare,
         stack_feedback,
         top - bottom
+    );
+    // RAM in use: the static sections (.data, .bss) and the deeper of the two stack marks.
+    let statics = (&raw const __ebss) as usize - (&raw const __sdata) as usize;
+    let stack = stack_setup.max(stack_loop);
+    hprintln!(
+        "ram: static={} B (.data+.bss), stack={} B, total={} B",
+        statics,
+        stack,
+        statics + stack
     );
     hprintln!("DONE");
     debug::exit(if all_ok && fpu_on {
