@@ -551,6 +551,10 @@ pub struct QpSolver<
     condensed: bool,
     /// The last solution is the polished one.
     polished: bool,
+    /// The last [`prepare`](Self::prepare) started the iteration and factorized its first
+    /// Newton system, with the settings `prefactor_settings`; the next solve uses it.
+    prefactored: bool,
+    prefactor_settings: QpSettings<T>,
     /// Condensed Hessian and the Cholesky factor of `H + Sigma`, sharing one array of blocks:
     /// `H_ij` (`i >= j`) at `[j][i]`, on and above the diagonal, and the factor's `L_ij`
     /// (`i > j`) at `[i][j]`, below it; the factor's diagonal blocks apart (`ld`: `L_ii^-1`).
@@ -690,6 +694,8 @@ impl<
             false
         },
         polished: false,
+        prefactored: false,
+        prefactor_settings: QpSettings::ZERO,
         tri: [[crate::zeros(); NC]; NC],
         ld: [crate::zeros(); NC],
         gc: [crate::zeros(); NC],
@@ -741,6 +747,8 @@ impl<
     /// Sets the primal starting point used when `settings.warm_start` is on.
     pub fn set_initial_guess(&mut self, guess: &QpSolution<T, NX, NU, N>) {
         self.sol = *guess;
+        // The starting point `prepare` built came from the guess it replaces.
+        self.prefactored = false;
     }
 
     fn check_input<const NH: usize>(&self, qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>) -> bool {
@@ -828,22 +836,36 @@ impl<
     }
 
     /// The part of a solve that does not depend on `x0`: condenses `qp` when
-    /// [`QpMethod`] says so (nothing to do for the Riccati recursion). A real-time iteration
-    /// calls it in its preparation phase, before the state is measured.
+    /// [`QpMethod`] says so, then builds the interior point's starting point and factorizes
+    /// its first Newton system (neither depends on `x0` unless stage 0 has general rows with
+    /// a bound; then that is left to the solve). A real-time iteration calls it in its
+    /// preparation phase, before the state is measured.
     ///
-    /// A condensed QP's data are checked and its bounds loaded here too, so that
+    /// The QP's data are checked and its bounds loaded here too, so that
     /// [`solve_prepared`](Self::solve_prepared) checks only `x0`; data that fail the check
-    /// are not condensed, and `solve_prepared` then reports them.
+    /// are not prepared, and `solve_prepared` then reports them.
     pub fn prepare<const NH: usize>(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>) {
+        self.prefactored = false;
         self.condensed = self.condensing_applies(qp)
             && self.check_stages(qp)
             && self.load_bounds(qp).is_ok()
             && self.condense(qp);
+        // The interior point's starting point and its first Newton system depend on `x0`
+        // only through stage 0's general rows: without them both are built here.
+        let ready =
+            self.condensed || (NR == N && self.check_stages(qp) && self.load_bounds(qp).is_ok());
+        if ready && self.rg.first().is_none_or(|r| r.count() == 0) {
+            self.start(qp);
+            self.prefactored = self.factorize(qp, None);
+            self.prefactor_settings = self.settings;
+        }
     }
 
     /// Solves `qp` with the work of the last [`prepare`](Self::prepare), which must have been
-    /// given the same QP except for `x0` (anything else may have changed only if the Riccati
-    /// recursion was chosen; [`solve`](Self::solve) is the safe call).
+    /// given the same QP except for `x0` ([`solve`](Self::solve) is the safe call). Settings
+    /// changed since, or an initial guess set since, leave the prepared factorization unused
+    /// (the solve starts from scratch, on the prepared condensed QP if there is one). Without
+    /// a `prepare` since the last solve, a QP the Riccati recursion solves is solved whole.
     pub fn solve_prepared<const NH: usize>(
         &mut self,
         qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>,
@@ -888,45 +910,11 @@ impl<
         self.polished
     }
 
-    /// The interior-point iteration.
-    fn iterate<const NH: usize>(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>) -> QpInfo<T> {
-        let nan = T::ZERO;
-        self.polished = false;
-        if self.condensed {
-            // `prepare` checked the rest and loaded the bounds.
-            if !qp.x0.iter().all(|v| v.finite()) {
-                return self.info(QpStatus::NonFiniteInput, 0, [nan; 4]);
-            }
-        } else {
-            if !self.check_input(qp) {
-                return self.info(QpStatus::NonFiniteInput, 0, [nan; 4]);
-            }
-            match self.load_bounds(qp) {
-                Ok(()) => {}
-                Err(BoundError::TooMany) => {
-                    return self.info(QpStatus::TooManyStateBounds, 0, [nan; 4]);
-                }
-                Err(_) => return self.info(QpStatus::Infeasible, 0, [nan; 4]),
-            }
-            // Without Riccati storage every QP is condensed (the solver's dimensions allow
-            // no other inequality than control bounds): this one had no `prepare`.
-            if NR != N {
-                self.condensed = self.condense(qp);
-                if !self.condensed {
-                    return self.info(QpStatus::NumericalError, 0, [nan; 4]);
-                }
-            }
-        }
-        let m = self.rx.iter().map(|r| r.count()).sum::<usize>()
-            + self.ru.iter().map(Rows::count).sum::<usize>()
-            + self.rg.iter().map(Rows::count).sum::<usize>()
-            + self.sg.iter().map(Soft::count).sum::<usize>()
-            + self.rxn.count()
-            + self.rgn.count()
-            + self.sgn.count();
-        let m_real = T::lit(m.max(1) as f64);
-
-        // Starting point.
+    /// The interior point's starting point: the primal start (the previous solution with
+    /// [`QpSettings::warm_start`], else zero; `x_0 = x0`), and each row's slacks and
+    /// multipliers (from the previous solve's with a valid dual warm start). Only stage 0's
+    /// general rows depend on `x0`.
+    fn start<const NH: usize>(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>) {
         let dual_warm = self.settings.warm_start_dual && self.dual_valid;
         if !self.settings.warm_start {
             let pi = self.sol.pi;
@@ -967,6 +955,57 @@ impl<
             self.rxn.init(&xn, floor, mu0);
             self.rgn.init(&gn, floor, mu0);
             self.sgn.init(&mut self.rgn, &gn, floor, mu0);
+        }
+    }
+
+    /// The interior-point iteration.
+    fn iterate<const NH: usize>(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>) -> QpInfo<T> {
+        let nan = T::ZERO;
+        self.polished = false;
+        // `prepare` started the iteration and factorized its first Newton system, with these
+        // settings.
+        let pre = core::mem::replace(&mut self.prefactored, false)
+            && self.prefactor_settings == self.settings;
+        if self.condensed || pre {
+            // `prepare` checked the rest and loaded the bounds.
+            if !qp.x0.iter().all(|v| v.finite()) {
+                return self.info(QpStatus::NonFiniteInput, 0, [nan; 4]);
+            }
+        } else {
+            if !self.check_input(qp) {
+                return self.info(QpStatus::NonFiniteInput, 0, [nan; 4]);
+            }
+            match self.load_bounds(qp) {
+                Ok(()) => {}
+                Err(BoundError::TooMany) => {
+                    return self.info(QpStatus::TooManyStateBounds, 0, [nan; 4]);
+                }
+                Err(_) => return self.info(QpStatus::Infeasible, 0, [nan; 4]),
+            }
+            // Without Riccati storage every QP is condensed (the solver's dimensions allow
+            // no other inequality than control bounds): this one had no `prepare`.
+            if NR != N {
+                self.condensed = self.condense(qp);
+                if !self.condensed {
+                    return self.info(QpStatus::NumericalError, 0, [nan; 4]);
+                }
+            }
+        }
+        let m = self.rx.iter().map(|r| r.count()).sum::<usize>()
+            + self.ru.iter().map(Rows::count).sum::<usize>()
+            + self.rg.iter().map(Rows::count).sum::<usize>()
+            + self.sg.iter().map(Soft::count).sum::<usize>()
+            + self.rxn.count()
+            + self.rgn.count()
+            + self.sgn.count();
+        let m_real = T::lit(m.max(1) as f64);
+
+        if pre {
+            if let Some(x) = self.sol.x.first_mut() {
+                *x = qp.x0;
+            }
+        } else {
+            self.start(qp);
         }
         self.dual_valid = false;
         if self.dense() {
@@ -1022,7 +1061,8 @@ impl<
             if self.max_multiplier() > diverge {
                 return self.info(QpStatus::Infeasible, iter, self.exact(qp, res));
             }
-            if !self.factorize(qp, None) {
+            // The first Newton system does not depend on `x0`: `prepare` may have factorized it.
+            if !(pre && iter == 0) && !self.factorize(qp, None) {
                 return self.info(QpStatus::NumericalError, iter, self.exact(qp, res));
             }
             // Predictor.

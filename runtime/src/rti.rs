@@ -599,8 +599,10 @@ impl<
 
     /// Preparation phase: linearizes dynamics, cost and constraints of every stage around the
     /// current trajectory (after shifting it by one stage if `settings.shift` and a feedback
-    /// has happened since the last preparation). Call it before the state measurement arrives;
-    /// calling it again without a feedback in between only re-linearizes.
+    /// has happened since the last preparation), then does the QP's work that does not
+    /// depend on the state ([`QpSolver::prepare`]: condensing, the first Newton system). Call
+    /// it before the state measurement arrives; calling it again without a feedback in
+    /// between only re-linearizes.
     pub fn prepare(&mut self) {
         if self.settings.shift && self.pending_shift {
             self.shift();

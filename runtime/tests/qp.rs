@@ -1061,3 +1061,103 @@ fn one_hessian_for_every_stage_solves_as_a_copy_per_stage() {
         - core::mem::size_of::<OcpQp<f64, 6, 3, 1, 1, 12, 1>>();
     assert_eq!(saved, 11 * (6 * 6 + 3 * 6 + 3 * 3) * 8);
 }
+
+/// One QP solved two ways that must agree bit for bit: `prepare` with a stale `x0` (that of
+/// `before`), then the right `x0` and `solve_prepared` (the real-time iteration's order: the
+/// first Newton system factorized before `x0` is known), and `solve` on a clone, from the
+/// start; and the same two with the regularization changed after `prepare` (the prepared
+/// factorization is then not used). Each solver first solves `before` (so the dual warm start
+/// has multipliers to start from).
+fn prepared_solves_agree<
+    const NX: usize,
+    const NU: usize,
+    const NG: usize,
+    const NGN: usize,
+    const N: usize,
+    const NC: usize,
+>(
+    before: &OcpQp<f64, NX, NU, NG, NGN, N>,
+    qp: &OcpQp<f64, NX, NU, NG, NGN, N>,
+    settings: QpSettings<f64>,
+    what: &str,
+) {
+    let mut stale = *qp;
+    stale.x0 = before.x0;
+    let mut prepared = Box::new(QpSolver::<f64, NX, NU, NG, NGN, N, NC>::NEW);
+    prepared.settings = settings;
+    prepared.solve(before);
+    let (mut changed, mut fresh) = (prepared.clone(), prepared.clone());
+    let mut fresh_changed = prepared.clone();
+    prepared.prepare(&stale);
+    let info = prepared.solve_prepared(qp);
+    assert_eq!(info.status, QpStatus::Solved, "{what}: {info:?}");
+    assert_eq!(fresh.solve(qp), info, "{what}: solve");
+    assert_eq!(
+        plan_of(fresh.solution()),
+        plan_of(prepared.solution()),
+        "{what}"
+    );
+    // A thousand times the regularization, set after `prepare`: it is what the solve uses.
+    changed.prepare(&stale);
+    changed.settings.reg *= 1e3;
+    fresh_changed.settings.reg *= 1e3;
+    let info = changed.solve_prepared(qp);
+    assert_eq!(fresh_changed.solve(qp), info, "{what}: setting changed");
+    assert_eq!(
+        plan_of(fresh_changed.solution()),
+        plan_of(changed.solution()),
+        "{what}: setting changed"
+    );
+}
+
+/// `prepare` builds the interior point's starting point and factorizes its first Newton
+/// system, which do not depend on `x0`; `solve_prepared` with another `x0` then solves as a
+/// whole `solve` does, bit for bit, by the Riccati recursion (state and control bounds) and
+/// condensed, cold and with the dual warm start, and with general rows at stage 0 (whose
+/// starting slacks do depend on `x0`: nothing is prepared there). A changed setting or a new
+/// initial guess after `prepare` leaves the prepared factorization unused.
+#[test]
+fn the_first_newton_system_is_factorized_in_prepare() {
+    let cold = QpSettings::DEFAULT;
+    let warm = QpSettings {
+        warm_start_dual: true,
+        ..QpSettings::DEFAULT
+    };
+    for seed in 0..6u64 {
+        let (before, qp) = (random_qp::<6, 3, 0, 0, 12>(seed), random_qp(seed + 100));
+        for (settings, name) in [(cold, "cold"), (warm, "warm")] {
+            let what = format!("seed {seed} Riccati {name}");
+            prepared_solves_agree::<6, 3, 0, 0, 12, 0>(&before, &qp, settings, &what);
+        }
+        let (before, qp) = (
+            control_bounded_qp::<4, 2, 8>(seed),
+            control_bounded_qp(seed + 100),
+        );
+        for (settings, name) in [(cold, "cold"), (warm, "warm")] {
+            let settings = QpSettings {
+                method: QpMethod::Condensed,
+                ..settings
+            };
+            let what = format!("seed {seed} condensed {name}");
+            prepared_solves_agree::<4, 2, 0, 0, 8, 8>(&before, &qp, settings, &what);
+        }
+        let (before, qp) = (
+            random_qp::<4, 2, 1, 0, 8>(seed),
+            random_qp::<4, 2, 1, 0, 8>(seed + 100),
+        );
+        let what = format!("seed {seed} general rows");
+        prepared_solves_agree::<4, 2, 1, 0, 8, 0>(&before, &qp, warm, &what);
+    }
+    // A new initial guess after `prepare` is the one the solve starts from.
+    let qp = random_qp::<6, 3, 0, 0, 12>(3);
+    let mut guessed = Box::new(QpSolver::<f64, 6, 3, 0, 0, 12>::NEW);
+    guessed.settings.warm_start = true;
+    let mut fresh = guessed.clone();
+    let mut guess = QpSolution::NEW;
+    guess.u[2][1] = 0.25;
+    guessed.prepare(&qp);
+    guessed.set_initial_guess(&guess);
+    fresh.set_initial_guess(&guess);
+    assert_eq!(guessed.solve_prepared(&qp), fresh.solve(&qp));
+    assert_eq!(plan_of(guessed.solution()), plan_of(fresh.solution()));
+}
