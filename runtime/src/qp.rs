@@ -1062,7 +1062,8 @@ impl<
                 return self.info(QpStatus::Infeasible, iter, self.exact(qp, res));
             }
             // The first Newton system does not depend on `x0`: `prepare` may have factorized it.
-            if !(pre && iter == 0) && !self.factorize(qp, None) {
+            let factorized = (pre && iter == 0) || self.factorize(qp, None);
+            if !factorized {
                 return self.info(QpStatus::NumericalError, iter, self.exact(qp, res));
             }
             // Predictor.
