@@ -5,8 +5,10 @@
 //!   method and by clarabel on the identical QP written out in sparse form. Both to their
 //!   default tolerances; clarabel's setup (KKT assembly and symbolic factorization) is outside
 //!   the timed region, so the comparison is solve against solve. `mpcc-condensed`: the same QP
-//!   condensed (condensing in the timed region), `mpcc-condensed-prepared`: after
-//!   `QpSolver::prepare`, as in a real-time iteration's feedback.
+//!   condensed (condensing in the timed region), `mpcc-condensed-prepared` and
+//!   `mpcc-prepared`: condensed and by the Riccati recursion after a `QpSolver::prepare`
+//!   outside the timed region (condensing, the first Newton system), as in a real-time
+//!   iteration's feedback.
 //! - `rti/{A,B}/{prepare,feedback,step}`: the closed loop of configs A (N = 10, dt = 0.04) and
 //!   B (N = 20, dt = 0.05); each timed iteration is one control step of the loop, which restarts
 //!   after 4 s.
@@ -59,8 +61,32 @@ fn bench_qp<const N: usize>(c: &mut Criterion, dt: f64) {
     });
     dense.prepare(&qp);
     assert!(dense.condensed());
+    // `prepare` outside the timed region before every solve: what the feedback phase runs
+    // (the first Newton system is factorized in `prepare`, and used by one solve).
     group.bench_function(format!("mpcc-condensed-prepared/N{N}"), |b| {
-        b.iter(|| black_box(dense.solve_prepared(black_box(&qp))))
+        b.iter_custom(|iters| {
+            let mut total = Duration::ZERO;
+            for _ in 0..iters {
+                dense.prepare(black_box(&qp));
+                let start = Instant::now();
+                black_box(dense.solve_prepared(black_box(&qp)));
+                total += start.elapsed();
+            }
+            total
+        })
+    });
+    // The same for the Riccati recursion, whose `prepare` factorizes the first Newton system.
+    group.bench_function(format!("mpcc-prepared/N{N}"), |b| {
+        b.iter_custom(|iters| {
+            let mut total = Duration::ZERO;
+            for _ in 0..iters {
+                ours.prepare(black_box(&qp));
+                let start = Instant::now();
+                black_box(ours.solve_prepared(black_box(&qp)));
+                total += start.elapsed();
+            }
+            total
+        })
     });
     let d = support::dense(&qp);
     let p = CscMatrix::from(&d.p).to_triu();
