@@ -628,7 +628,7 @@ impl<
             let r = self.model.residual(&x, &u, &p, &mut jx, &mut ju) - self.yref[k];
             // (WJ)' (a diagonal W scales J's rows), then J'WJ as (WJ)'J: the Jacobian on the
             // right, where its zeros are skipped (a residual that selects states and
-            // controls is mostly zeros), written into the stage in place.
+            // controls is mostly zeros), written into the stage's Hessian in place (below).
             let wjxt = weighted_transpose(&self.w, self.w_diag, &jx);
             let wjut = weighted_transpose(&self.w, self.w_diag, &ju);
             s.gx = mul(&wjxt, &r);
