@@ -8,13 +8,26 @@ mod common;
 
 use std::io::{BufRead, BufReader};
 use std::process::{Command, Stdio};
+use std::sync::atomic::{AtomicU16, Ordering};
 use std::time::Duration;
 
 use common::{mpcc, num, wait_with_timeout};
 
+/// A loopback UDP port free now, for `mpcc fly` to bind. It comes from 20000..32000, below
+/// Linux's default ephemeral range (32768..=60999), so a socket bound to port 0 meanwhile
+/// (`mpcc sitl`'s client link, a test beside this one) is never given it before `fly` starts
+/// and binds it.
 fn free_port() -> u16 {
-    let s = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
-    s.local_addr().unwrap().port()
+    static NEXT: AtomicU16 = AtomicU16::new(0);
+    let start = (std::process::id() % 12_000) as u16;
+    for _ in 0..256 {
+        let i = NEXT.fetch_add(1, Ordering::Relaxed);
+        let port = 20_000 + (start.wrapping_add(i.wrapping_mul(7)) % 12_000);
+        if std::net::UdpSocket::bind(("127.0.0.1", port)).is_ok() {
+            return port;
+        }
+    }
+    panic!("no free loopback port in 20000..32000 after 256 tries")
 }
 
 fn spawn(args: &[&str]) -> std::process::Child {

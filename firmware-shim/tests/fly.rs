@@ -25,10 +25,7 @@ use firmware_shim::vehicle::{SimVehicle, VehicleConfig, serve};
 use mavlink::dialects::common::{MavCmd, MavMessage};
 use mpc_sim::mission::MissionConfig;
 
-fn free_port() -> u16 {
-    let s = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
-    s.local_addr().unwrap().port()
-}
+mod support;
 
 struct Flown {
     pilot: Pilot,
@@ -46,7 +43,7 @@ fn fly(cfg: PilotConfig, seed: u64, relay: Option<(RelayConfig, RelayHooks)>) ->
     let _flying = ONE_FLIGHT_AT_A_TIME
         .lock()
         .unwrap_or_else(PoisonError::into_inner);
-    let shim_port = free_port();
+    let (shim, shim_port) = support::open_udpin_on_a_free_port();
     let shim_addr: SocketAddr = format!("127.0.0.1:{shim_port}").parse().unwrap();
     let relay = relay.map(|(c, h)| {
         Relay::start_with_hooks("127.0.0.1:0".parse().unwrap(), shim_addr, c, h).unwrap()
@@ -64,7 +61,6 @@ fn fly(cfg: PilotConfig, seed: u64, relay: Option<(RelayConfig, RelayHooks)>) ->
         messages::PX4_COMPONENT,
     )
     .unwrap();
-    let shim = Link::open(&format!("udpin:{shim_addr}").parse().unwrap(), 1).unwrap();
     let vehicle = std::thread::scope(|s| {
         let sitl = s.spawn(|| {
             let mut v = vehicle;

@@ -11,14 +11,11 @@ use firmware_shim::messages::{self, Inbound, Px4Mode, classify};
 use firmware_shim::transport::Link;
 use firmware_shim::vehicle::{SimVehicle, VehicleConfig, serve};
 
-fn free_port() -> u16 {
-    let s = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
-    s.local_addr().unwrap().port()
-}
+mod support;
 
 #[test]
 fn killed_controller_makes_the_simulated_px4_hold_position() {
-    let port = free_port();
+    let (shim, port) = support::open_udpin_on_a_free_port();
     let stop = AtomicBool::new(false);
     let vehicle = SimVehicle::new(VehicleConfig::default());
     let hover = vehicle.thrust_map().hover_thrust;
@@ -28,7 +25,6 @@ fn killed_controller_makes_the_simulated_px4_hold_position() {
         messages::PX4_COMPONENT,
     )
     .unwrap();
-    let shim = Link::open(&format!("udpin:127.0.0.1:{port}").parse().unwrap(), 1).unwrap();
     let start = Instant::now();
     let (vehicle, killed_at, z_at_kill) = std::thread::scope(|s| {
         let sitl = s.spawn(|| {

@@ -11,6 +11,8 @@ use firmware_shim::messages::{
 use firmware_shim::transport::{Address, Link, TransportError};
 use mavlink::dialects::common::MavMessage;
 
+mod support;
+
 #[test]
 fn addresses_parse_and_bad_ones_say_what_to_use() {
     assert_eq!(
@@ -58,11 +60,6 @@ fn addresses_parse_and_bad_ones_say_what_to_use() {
     }
 }
 
-fn free_port() -> u16 {
-    let s = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
-    s.local_addr().unwrap().port()
-}
-
 fn recv_within(link: &Link, timeout: Duration) -> Option<MavMessage> {
     let start = Instant::now();
     while start.elapsed() < timeout {
@@ -76,8 +73,7 @@ fn recv_within(link: &Link, timeout: Duration) -> Option<MavMessage> {
 
 #[test]
 fn udpin_and_udpout_talk_over_loopback_without_blocking() {
-    let port = free_port();
-    let server = Link::open(&format!("udpin:127.0.0.1:{port}").parse().unwrap(), 1).unwrap();
+    let (server, port) = support::open_udpin_on_a_free_port();
     let client = Link::open(&format!("udpout:127.0.0.1:{port}").parse().unwrap(), 1).unwrap();
     // Nothing waiting: returns at once.
     let t = Instant::now();
