@@ -774,8 +774,13 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
     let (nbx_raw, nr_raw) = bound_rows_and_riccati(l, nc_raw);
     let (nbx, nr) = (ul(nbx_raw), ul(nr_raw));
     let constant_jacobians = l.constant_residual_jacobians;
+    let constant_stage_jacobians = l.constant_stage_residual_jacobians;
     // One stage Hessian in the QP when `J'WJ` is the same at every stage.
-    let nh = if constant_jacobians { ul(1) } else { n.clone() };
+    let nh = if constant_stage_jacobians {
+        ul(1)
+    } else {
+        n.clone()
+    };
     let model_name = &l.name;
     let solver_doc = doc_lines(&format!(
         "The NMPC solver of `{model_name}`: horizon {n}, {} s per interval, one real-time \
@@ -821,7 +826,7 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
         /// QP (`NC = N`, no state bounds, no general constraints), which then has no Riccati
         /// recursion (and ignores a `QpMethod::Riccati` setting).
         pub const NR: usize = #nr;
-        /// Stage Hessians in the QP: `1` when the residual Jacobians are constants (the
+        /// Stage Hessians in the QP: `1` when the stage residual Jacobians are constants (the
         /// Gauss-Newton Hessian `J'WJ` is then the same at every stage), `N` otherwise.
         pub const NH: usize = #nh;
         /// Interval length in seconds.
@@ -935,6 +940,7 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
 
         impl mpc_runtime::Model<Real, NX, NU, NP, NY, NYN, NG, NGN> for Model {
             const CONSTANT_RESIDUAL_JACOBIANS: bool = #constant_jacobians;
+            const CONSTANT_STAGE_RESIDUAL_JACOBIANS: bool = #constant_stage_jacobians;
 
             fn dynamics(
                 &self,

@@ -127,6 +127,9 @@ pub struct Lowered {
     /// Every entry of `J_x`, `J_u` and the terminal `J_x` is a constant (the residuals are
     /// linear in the states and controls, whatever the parameters).
     pub constant_residual_jacobians: bool,
+    /// Every entry of the stage residual's `J_x` and `J_u` is a constant (the terminal
+    /// residual may be nonlinear): one `J'WJ` serves every stage.
+    pub constant_stage_residual_jacobians: bool,
     /// `h`, `C_x`, `C_u` (when `ng > 0`).
     pub constraints: Option<Function>,
     /// `h_N`, `C_x` (when `ngn > 0`).
@@ -532,6 +535,7 @@ pub fn lower<'g>(ocp: &Ocp<'g>) -> Result<Lowered, CodegenError> {
         }
         b.function("residual", &[Arg::X, Arg::U, Arg::P], out)?
     };
+    let constant_stage_residual_jacobians = constant_residual_jacobians;
     let terminal_residual = {
         let jac = g.jacobian(&yn, &x)?;
         constant_residual_jacobians &= jac.iter().all(|(_, _, e)| e.as_constant().is_some());
@@ -714,6 +718,7 @@ pub fn lower<'g>(ocp: &Ocp<'g>) -> Result<Lowered, CodegenError> {
         residual,
         terminal_residual,
         constant_residual_jacobians,
+        constant_stage_residual_jacobians,
         constraints,
         terminal_constraints,
         weights,

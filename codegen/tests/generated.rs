@@ -134,9 +134,9 @@ fn lib_rs(g: &GeneratedCrate) -> &str {
 /// with a bound in the model file (the point mass bounds its 3 accelerations), and a solver
 /// that condenses and has nothing but control bounds has no Riccati storage (`NR = 0`); the
 /// probe model's general constraints (its soft floor) keep it (`NR = N`) even condensed. The
-/// QP has one stage Hessian (`NH = 1`) where every residual is linear in the model file (`x -
-/// xref`, `u - uref`: QR-bench and the point mass), one per stage for the probe, whose
-/// terminal residual (the probe's velocity) is not.
+/// QP has one stage Hessian (`NH = 1`) where every stage residual is linear in the model file
+/// (`x - xref`, `u - uref`: QR-bench, the point mass, and the probe, whose terminal residual,
+/// the probe's velocity, is not linear but has no stage Hessian).
 #[test]
 fn condensing_storage_follows_the_method_and_the_model() {
     let rates = "models/quadrotor_rates.mpc";
@@ -169,7 +169,7 @@ fn condensing_storage_follows_the_method_and_the_model() {
             "models/quadrotor_probe.mpc",
             None,
             condensed,
-            ["20", "0", "20", "20"],
+            ["20", "0", "20", "1"],
             Some("Condensed"),
         ),
     ];

@@ -84,3 +84,35 @@ fn constant_residual_jacobians_are_recognized() {
         "terminal residual s = sin(x[0]) weight eye(1);"
     )));
 }
+
+/// The stages alone may have constant residual Jacobians while the terminal one does not
+/// (the probe model's terminal velocity residual): then every stage shares one `J'WJ`
+/// (`NH = 1`) and only the terminal one is computed again at each linearization.
+#[test]
+fn constant_stage_residual_jacobians_are_recognized() {
+    let both = |src: &str| {
+        lowered(src, |l| {
+            (
+                l.constant_stage_residual_jacobians,
+                l.constant_residual_jacobians,
+            )
+        })
+    };
+    assert_eq!(
+        both(include_str!("../../models/quadrotor_rates.mpc")),
+        (true, true)
+    );
+    assert_eq!(
+        both(include_str!("../../models/quadrotor_probe.mpc")),
+        (true, false)
+    );
+    assert_eq!(both(&RESIDUAL_MODEL.replace("RESIDUAL", "")), (true, true));
+    assert_eq!(
+        both(&RESIDUAL_MODEL.replace("RESIDUAL", "terminal residual s = sin(x[0]) weight eye(1);")),
+        (true, false)
+    );
+    assert_eq!(
+        both(&RESIDUAL_MODEL.replace("RESIDUAL", "residual sq = x[0] * x[1] weight eye(1);")),
+        (false, false)
+    );
+}

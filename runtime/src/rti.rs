@@ -130,9 +130,9 @@ pub enum SetError {
 
 /// A real-time-iteration NMPC solver for model `M` with horizon `N`; `NC`, `NBX` and `NR`
 /// size its QP solver ([`QpSolver`]). `NH` is the number of stage Hessians its QP keeps
-/// ([`OcpQp`]): `N`, or `1` for a model with constant residual Jacobians
-/// ([`Model::CONSTANT_RESIDUAL_JACOBIANS`]), whose Gauss-Newton Hessian `J'WJ` is the same at
-/// every stage (one weight `W` for all). Other values fail to compile.
+/// ([`OcpQp`]): `N`, or `1` for a model with constant stage residual Jacobians
+/// ([`Model::CONSTANT_STAGE_RESIDUAL_JACOBIANS`]), whose Gauss-Newton Hessian `J'WJ` is the
+/// same at every stage (one weight `W` for all). Other values fail to compile.
 #[derive(Clone, Debug)]
 pub struct Rti<
     T: Real,
@@ -182,9 +182,10 @@ pub struct Rti<
     l2n: SVector<T, NGN>,
     /// Some penalty is positive (the merit function then evaluates the constraints).
     any_soft: bool,
-    /// The stages' Gauss-Newton terms `J'WJ` are those of the current weights; kept from one
-    /// linearization to the next when the model's residual Jacobians are constant
-    /// ([`Model::CONSTANT_RESIDUAL_JACOBIANS`]).
+    /// The Gauss-Newton terms `J'WJ` are those of the current weights; kept from one
+    /// linearization to the next where the model's residual Jacobians are constant (the
+    /// stages': [`Model::CONSTANT_STAGE_RESIDUAL_JACOBIANS`]; the terminal one:
+    /// [`Model::CONSTANT_RESIDUAL_JACOBIANS`]).
     gn_current: bool,
     plan: [SVector<T, NU>; N],
     plan_age: usize,
@@ -323,8 +324,8 @@ impl<
     const fn build(model: M, zero: bool) -> Self {
         const {
             assert!(
-                NH == N || (NH == 1 && M::CONSTANT_RESIDUAL_JACOBIANS),
-                "NH = 1 (one stage Hessian) needs a model with constant residual Jacobians"
+                NH == N || (NH == 1 && M::CONSTANT_STAGE_RESIDUAL_JACOBIANS),
+                "NH = 1 (one stage Hessian) needs a model with constant stage residual Jacobians"
             )
         };
         let (lo, hi) = if zero {
@@ -616,7 +617,8 @@ impl<
 
     fn linearize(&mut self) {
         // With constant residual Jacobians, J'WJ changes only with the weights.
-        let gn = !(M::CONSTANT_RESIDUAL_JACOBIANS && self.gn_current);
+        let gn = !(M::CONSTANT_STAGE_RESIDUAL_JACOBIANS && self.gn_current);
+        let gn_terminal = !(M::CONSTANT_RESIDUAL_JACOBIANS && self.gn_current);
         for k in 0..N {
             let (x, u, p) = (self.x[k], self.u[k], self.p[k]);
             let next = if k + 1 < N { self.x[k + 1] } else { self.xn };
@@ -650,7 +652,7 @@ impl<
                 mul_mostly_zero_into(&mut h.r, &wjut, &ju);
             }
         }
-        self.linearize_terminal(gn);
+        self.linearize_terminal(gn_terminal);
         self.gn_current = true;
     }
 

@@ -268,6 +268,42 @@ fn constant_residual_jacobians_keep_j_w_j_until_the_weights_change() {
     assert_eq!(a.qp().hessians[7].q[(0, 1)], 5.0, "the last weights' J'WJ");
 }
 
+/// A model whose stage residual Jacobians are constant but whose terminal residual is not
+/// (`CONSTANT_STAGE_RESIDUAL_JACOBIANS` without `CONSTANT_RESIDUAL_JACOBIANS`, as the probe
+/// model) keeps one stage Hessian (`NH = 1`) and computes the terminal `J'WJ` at every
+/// linearization: it flies the closed loop bit for bit as the same model on the general path
+/// (`NH = N`, nothing kept), and its terminal Hessian does change from step to step.
+#[test]
+fn a_nonlinear_terminal_residual_alone_keeps_the_stage_hessian() {
+    use support::quadrotor::qrbench_curved_terminal;
+    let dt = 0.05;
+    let mut a = qrbench_curved_terminal::<20, false, 20>(dt);
+    let mut c = qrbench_curved_terminal::<20, true, 1>(dt);
+    let mut x = SVector::<f64, NX>::from(X0);
+    let mut terminal_changes = 0;
+    let mut last_terminal = c.qp().terminal.q;
+    for k in 0..40 {
+        a.prepare();
+        c.prepare();
+        for ha in &a.qp().hessians {
+            let hc = &c.qp().hessians[0];
+            assert_eq!((ha.q, ha.s, ha.r), (hc.q, hc.s, hc.r), "step {k}");
+        }
+        assert_eq!(a.qp().terminal.q, c.qp().terminal.q, "step {k}");
+        if c.qp().terminal.q != last_terminal {
+            terminal_changes += 1;
+        }
+        last_terminal = c.qp().terminal.q;
+        let (ua, ia) = a.feedback(&x);
+        let (uc, ic) = c.feedback(&x);
+        assert_eq!(ia.status, RtiStatus::Ok, "step {k}");
+        assert_eq!((ua, ia), (uc, ic), "step {k}");
+        x = plant(&x, &ua, dt, 10);
+    }
+    assert!(terminal_changes > 30, "{terminal_changes}");
+    assert!(position_error(&x) < 0.5, "{x}");
+}
+
 /// `Rti::unconfigured` (every field zero, so that a `static` of it is zero-filled memory)
 /// configured like `Rti::new` flies the same closed loop bit for bit, with either QP method
 /// and in f32; left unconfigured it still returns a finite control (the fallback), never a

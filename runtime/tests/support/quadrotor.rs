@@ -12,8 +12,10 @@ pub const G: f64 = 9.81;
 /// One RK4 step of length `dt` per shooting interval; residual y = (x, u), terminal y = x.
 /// `CONST_J`: whether it declares its (constant) residual Jacobians constant
 /// (`Model::CONSTANT_RESIDUAL_JACOBIANS`); the default keeps the solver's general path.
+/// `CURVED_N`: the terminal residual is `x_i + x_i^2 / 50` instead (nonlinear, so only the
+/// stage Jacobians are constant: `Model::CONSTANT_STAGE_RESIDUAL_JACOBIANS` is `CONST_J`).
 #[derive(Clone, Copy, Debug)]
-pub struct Quadrotor<T, const CONST_J: bool = false> {
+pub struct Quadrotor<T, const CONST_J: bool = false, const CURVED_N: bool = false> {
     pub dt: T,
 }
 
@@ -118,8 +120,11 @@ pub fn plant(
     x
 }
 
-impl<T: Real, const CONST_J: bool> Model<T, NX, NU, 0, NY, NX, 0, 0> for Quadrotor<T, CONST_J> {
-    const CONSTANT_RESIDUAL_JACOBIANS: bool = CONST_J;
+impl<T: Real, const CONST_J: bool, const CURVED_N: bool> Model<T, NX, NU, 0, NY, NX, 0, 0>
+    for Quadrotor<T, CONST_J, CURVED_N>
+{
+    const CONSTANT_RESIDUAL_JACOBIANS: bool = CONST_J && !CURVED_N;
+    const CONSTANT_STAGE_RESIDUAL_JACOBIANS: bool = CONST_J;
 
     fn dynamics(
         &self,
@@ -158,6 +163,13 @@ impl<T: Real, const CONST_J: bool> Model<T, NX, NU, 0, NY, NX, 0, 0> for Quadrot
         jx: &mut SMatrix<T, NX, NX>,
     ) -> SVector<T, NX> {
         *jx = SMatrix::identity();
+        if CURVED_N {
+            let c = T::lit(0.02);
+            for i in 0..NX {
+                jx[(i, i)] = T::ONE + c * T::lit(2.0) * x[i];
+            }
+            return x + x.component_mul(x) * c;
+        }
         *x
     }
 }
@@ -223,8 +235,25 @@ pub fn qrbench_one_hessian<const N: usize>(dt: f64) -> Box<QrSolver<f64, N, 0, t
     s
 }
 
-fn configure<T: Real, const N: usize, const NC: usize, const CONST_J: bool, const NH: usize>(
-    s: &mut QrSolver<T, N, NC, CONST_J, NH>,
+/// [`qrbench_in`] in f64 with the curved terminal residual (`CURVED_N`), declaring its
+/// stage residual Jacobians constant (`CONST_J`) and one stage Hessian (`NH = 1`), or not
+/// (the solver's general path, `NH = N`).
+pub fn qrbench_curved_terminal<const N: usize, const CONST_J: bool, const NH: usize>(
+    dt: f64,
+) -> Box<Rti<f64, Quadrotor<f64, CONST_J, true>, NX, NU, 0, NY, NX, 0, 0, N, 0, NX, N, NH>> {
+    let mut s = Box::new(Rti::new(Quadrotor { dt }));
+    configure(&mut s);
+    s
+}
+
+fn configure<
+    T: Real,
+    M: Model<T, NX, NU, 0, NY, NX, 0, 0>,
+    const N: usize,
+    const NC: usize,
+    const NH: usize,
+>(
+    s: &mut Rti<T, M, NX, NU, 0, NY, NX, 0, 0, N, NC, NX, N, NH>,
 ) {
     let c = |v: f64| T::lit(v);
     let mut w = SMatrix::<T, NY, NY>::zeros();
