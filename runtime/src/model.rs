@@ -37,12 +37,13 @@ pub trait Model<
     const CONSTANT_RESIDUAL_JACOBIANS: bool = false;
 
     /// The Jacobians of [`residual`](Self::residual) alone are constants (the stage cost is
-    /// linear least squares, the terminal one may not be: a probe's landing point, say). Then
-    /// every stage has the same `J'WJ`, computed once per weight change, and the QP can keep one
-    /// stage Hessian (`NH = 1`); the terminal `J'WJ` is computed at every linearization unless
-    /// [`CONSTANT_RESIDUAL_JACOBIANS`](Self::CONSTANT_RESIDUAL_JACOBIANS) holds too. Defaults to
-    /// that flag (constant Jacobians everywhere are constant at the stages); the same warning
-    /// applies.
+    /// linear least squares, the terminal one may not be: the probe model's, the probe's
+    /// velocity at release). Then every stage has the same `J'WJ`, computed once per weight
+    /// change, and the QP can keep one stage Hessian (`NH = 1`); the terminal `J'WJ` is
+    /// computed at every linearization unless
+    /// [`CONSTANT_RESIDUAL_JACOBIANS`](Self::CONSTANT_RESIDUAL_JACOBIANS) holds too. Defaults
+    /// to that flag (constant Jacobians everywhere are constant at the stages); the same
+    /// warning applies.
     const CONSTANT_STAGE_RESIDUAL_JACOBIANS: bool = Self::CONSTANT_RESIDUAL_JACOBIANS;
 
     /// `F(x, u, p)` with `A = dF/dx` and `B = dF/du`.
