@@ -8,7 +8,9 @@
 //!   condensed (condensing in the timed region), `mpcc-condensed-prepared` and
 //!   `mpcc-prepared`: condensed and by the Riccati recursion after a `QpSolver::prepare`
 //!   outside the timed region (condensing, the first Newton system), as in a real-time
-//!   iteration's feedback.
+//!   iteration's feedback. `mpcc-condensed-polished[-prepared]`: condensed, the interior
+//!   point to 1e-3 and then the active-set polish, whose solution is the exact one (checked
+//!   against the default solve before timing).
 //! - `rti/{A,B}/{prepare,feedback,step}`: the closed loop of configs A (N = 10, dt = 0.04) and
 //!   B (N = 20, dt = 0.05); each timed iteration is one control step of the loop, which restarts
 //!   after 4 s.
@@ -70,6 +72,43 @@ fn bench_qp<const N: usize>(c: &mut Criterion, dt: f64) {
                 dense.prepare(black_box(&qp));
                 let start = Instant::now();
                 black_box(dense.solve_prepared(black_box(&qp)));
+                total += start.elapsed();
+            }
+            total
+        })
+    });
+    // The interior point to 1e-3 only, then the polish (active-set iterations from it; on in
+    // f32, off by default in f64): the exact solution (checked here against the solve to the
+    // default tolerances) from fewer interior-point iterations.
+    let mut loose = Box::new(QpSolver::<f64, NX, NU, 0, 0, N, N>::NEW);
+    loose.settings.method = QpMethod::Condensed;
+    loose.settings.tol_stat = 1e-3;
+    loose.settings.tol_eq = 1e-3;
+    loose.settings.tol_ineq = 1e-3;
+    loose.settings.tol_comp = 1e-3;
+    loose.settings.polish = true;
+    let info = loose.solve(&qp);
+    assert!(info.status == mpc_runtime::QpStatus::Solved && loose.polished());
+    let tight = dense.solve(&qp);
+    assert_eq!(tight.status, mpc_runtime::QpStatus::Solved);
+    let gap = (loose.solution().u.iter())
+        .zip(&dense.solution().u)
+        .map(|(a, b)| (a - b).amax())
+        .fold(0.0f64, f64::max);
+    assert!(
+        gap <= 1e-6,
+        "polished solution {gap:e} from the default one"
+    );
+    group.bench_function(format!("mpcc-condensed-polished/N{N}"), |b| {
+        b.iter(|| black_box(loose.solve(black_box(&qp))))
+    });
+    group.bench_function(format!("mpcc-condensed-polished-prepared/N{N}"), |b| {
+        b.iter_custom(|iters| {
+            let mut total = Duration::ZERO;
+            for _ in 0..iters {
+                loose.prepare(black_box(&qp));
+                let start = Instant::now();
+                black_box(loose.solve_prepared(black_box(&qp)));
                 total += start.elapsed();
             }
             total

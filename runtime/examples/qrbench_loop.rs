@@ -6,6 +6,7 @@
 //!
 //! It prints the number of steps, the mean QP iterations and the final position error.
 //! Environment: `COLD=1` starts every QP cold, `TOL=1e-6` loosens the QP tolerances,
+//! `POLISH=1` polishes every QP's solution (`QpSettings::polish`),
 //! `METHOD=riccati` or `METHOD=condensed` forces how the QPs are solved (default: the solver's
 //! automatic choice, with storage for condensing).
 
@@ -46,6 +47,8 @@ fn run<const N: usize>(dt: f64, steps: usize) {
         s.settings.qp.tol_ineq = t;
         s.settings.qp.tol_comp = t * 1e-2;
     }
+    // POLISH=1: the active-set polish after every QP (off by default in f64).
+    s.settings.qp.polish = std::env::var_os("POLISH").is_some();
     let mut x = SVector::from(X0);
     let mut iterations = 0u32;
     for _ in 0..steps {

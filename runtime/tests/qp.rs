@@ -1161,3 +1161,84 @@ fn the_first_newton_system_is_factorized_in_prepare() {
     assert_eq!(guessed.solve_prepared(&qp), fresh.solve(&qp));
     assert_eq!(plan_of(guessed.solution()), plan_of(fresh.solution()));
 }
+
+/// Condensed QPs solved by the interior point only to 1e-3 and then polished: the polish
+/// (the active set guessed from that rough interior point, `QpSettings::polish`) lands on
+/// clarabel's solution as the solve to the default tolerances does, from fewer interior-point
+/// iterations (the QP benchmark's `mpcc-condensed-polished` cases). Fixed draws of three
+/// sizes; draws clarabel finds nearly degenerate are not judged (as in the other
+/// comparisons), and every judged one must be polished and within 1e-7 relative. Returns
+/// the draws judged and polished, the worst error, and the mean interior-point iterations
+/// of the loose solve and of one to the default tolerances.
+fn loose_then_polished<const NX: usize, const NU: usize, const N: usize>(
+    seeds: core::ops::Range<u64>,
+) -> (usize, usize, f64, f64, f64) {
+    let (mut judged, mut polished, mut worst) = (0, 0, 0.0f64);
+    let (mut iterations, mut default_iterations) = (0.0, 0.0);
+    for seed in seeds {
+        let qp = control_bounded_qp::<NX, NU, N>(seed);
+        let Some(reference) = clarabel_solve(&qp) else {
+            continue;
+        };
+        if reference.strict_complementarity <= 1e-3 {
+            continue;
+        }
+        let mut solver = Box::new(QpSolver::<f64, NX, NU, 0, 0, N, N>::NEW);
+        solver.settings.method = QpMethod::Condensed;
+        solver.settings.tol_stat = 1e-3;
+        solver.settings.tol_eq = 1e-3;
+        solver.settings.tol_ineq = 1e-3;
+        solver.settings.tol_comp = 1e-3;
+        solver.settings.polish = true;
+        let info = solver.solve(&qp);
+        assert_eq!(info.status, QpStatus::Solved, "seed {seed}");
+        assert!(solver.condensed());
+        judged += 1;
+        iterations += f64::from(info.iterations);
+        let mut default = Box::new(QpSolver::<f64, NX, NU, 0, 0, N, N>::NEW);
+        default.settings.method = QpMethod::Condensed;
+        default_iterations += f64::from(default.solve(&qp).iterations);
+        if solver.polished() {
+            polished += 1;
+            let s = solver.solution();
+            let xs: Vec<_> = (0..=N).map(|k| *s.state(k).unwrap()).collect();
+            worst = worst.max(compare(&reference, &s.u, &xs));
+        }
+    }
+    let n = judged.max(1) as f64;
+    (
+        judged,
+        polished,
+        worst,
+        iterations / n,
+        default_iterations / n,
+    )
+}
+
+#[test]
+fn a_loose_interior_point_then_the_polish_solves_condensed_qps_exactly() {
+    for (name, draws, (judged, polished, worst, loose, default)) in [
+        ("4x2, N = 8", 150, loose_then_polished::<4, 2, 8>(0..150)),
+        (
+            "10x4, N = 10",
+            150,
+            loose_then_polished::<10, 4, 10>(0..150),
+        ),
+        ("6x3, N = 20", 100, loose_then_polished::<6, 3, 20>(0..100)),
+    ] {
+        eprintln!(
+            "{name}: {judged} of {draws} judged, {polished} polished, worst {worst:.2e}; \
+             interior-point iterations {loose:.2} (default tolerances {default:.2})"
+        );
+        assert!(
+            10 * judged >= 9 * draws,
+            "{name}: {judged} of {draws} judged"
+        );
+        assert_eq!(polished, judged, "{name}: a polish was refused");
+        assert!(worst <= 1e-7, "{name}: {worst:e} from clarabel");
+        assert!(
+            loose < default,
+            "{name}: {loose} iterations, {default} by default"
+        );
+    }
+}
