@@ -127,6 +127,51 @@ fn rti_tracks_converged_sqp() {
     }
 }
 
+/// The full SQP with its QPs solved loosely and polished (`RtiSettings::sqp_loose_qps`, the
+/// f64 default) converges to what it converges to with every QP solved to the QP tolerances:
+/// QR-bench B's converged-SQP closed loop, by the Riccati recursion (whose polish applies)
+/// and by condensing, and in a solver with condensing storage forced to the Riccati
+/// recursion, whose polish is refused (it then solves every QP to the tolerances): every
+/// step's plan within the SQP's step tolerance (1e-6: both stop once a step is below it, and
+/// the interior point's QP solutions at the default tolerances are some 1e-9 off the exact
+/// ones the polish gives), the same SQP iteration counts give or take one.
+#[test]
+fn loosely_solved_polished_qps_give_the_full_sqp_its_iterates() {
+    fn fly<const NC: usize>(method: QpMethod) {
+        let dt = 0.05;
+        let mut loose = qrbench_in::<f64, 20, NC>(dt);
+        assert!(loose.settings.sqp_loose_qps, "the f64 default");
+        loose.settings.qp.method = method;
+        let mut tight = loose.clone();
+        tight.settings.sqp_loose_qps = false;
+        let mut x = SVector::<f64, NX>::from(X0);
+        let mut worst = 0.0f64;
+        for k in 0..40 {
+            let a = loose.solve_sqp(&x);
+            let b = tight.solve_sqp(&x);
+            assert_eq!(a.status, b.status, "{method:?} step {k}");
+            assert!(a.status == RtiStatus::Ok, "{method:?} step {k}: {a:?}");
+            assert!(
+                a.sqp_iterations.abs_diff(b.sqp_iterations) <= 1,
+                "{method:?} step {k}: {} against {} SQP iterations",
+                a.sqp_iterations,
+                b.sqp_iterations
+            );
+            for i in 0..20 {
+                let d = (loose.control(i).unwrap() - tight.control(i).unwrap()).amax();
+                worst = worst.max(d);
+            }
+            let u = *loose.control(0).unwrap();
+            x = plant(&x, &u, dt, 10);
+        }
+        assert!(worst <= 1e-6, "{method:?}: plans {worst:e} apart");
+        eprintln!("NC = {NC}, {method:?}: plans at most {worst:.1e} apart");
+    }
+    fly::<0>(QpMethod::Riccati);
+    fly::<20>(QpMethod::Condensed);
+    fly::<20>(QpMethod::Riccati);
+}
+
 /// The same closed loop with the solver in f32 (the microcontroller precision; the plant stays
 /// f64): every QP is solved, and the states stay within 1e-3 of the f64 closed loop at every
 /// step.
