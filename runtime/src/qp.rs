@@ -905,6 +905,25 @@ impl<
         info
     }
 
+    /// Polishes the last solve's solution of `qp` (which must be the QP solved) with the
+    /// current settings, as [`QpSettings::polish`] does at the end of a solve, whatever that
+    /// setting: for an interior point stopped early on purpose and polished to tighter
+    /// tolerances than it ran to (the polish of a QP solved by the Riccati recursion keeps
+    /// its result only if it meets the tolerances). Returns whether the polish was kept
+    /// ([`polished`](Self::polished)); if not, the solution is the interior point's. QPs
+    /// with soft rows, and QPs solved by the Riccati recursion in a solver with condensing
+    /// storage, are not polished.
+    pub fn polish<const NH: usize>(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>) -> bool {
+        self.polished = false;
+        if self.condensed {
+            self.polished = self.condensed_polish();
+            self.expand(qp);
+        } else if NC == 0 {
+            self.polished = self.riccati_polish(qp).is_some();
+        }
+        self.polished
+    }
+
     /// Whether the last solve's solution is the polished one ([`QpSettings::polish`]).
     pub fn polished(&self) -> bool {
         self.polished

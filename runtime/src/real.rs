@@ -43,9 +43,10 @@ pub trait Real: RealField + Copy + Default + PartialOrd {
     /// `mu / lam` off, off in f64.
     const DEFAULT_POLISH: bool;
     /// Default of [`RtiSettings::sqp_loose_qps`](crate::RtiSettings::sqp_loose_qps): whether
-    /// the full SQP solves its QPs by the interior point to 1e-3 and then the polish: in f64 (QR-bench A: 26 % fewer
-    /// instructions per step, the same closed loop to 1e-11 m), not in f32, where it costs
-    /// SQP iterations (A: 11.91 per step instead of 10.74).
+    /// the full SQP solves its QPs by the interior point to 1e-3 and then the polish: in f64
+    /// (QR-bench A: 24 % fewer instructions per step, the same closed loop to 1e-11 m), not
+    /// in f32, where it costs SQP iterations (A: 11.91 per step instead of 10.74, B: 9.35
+    /// instead of 7.88).
     const SQP_LOOSE_QPS: bool;
 
     /// Conversion from an `f64` literal (rounding for `f32`).

@@ -836,10 +836,11 @@ impl<
         tight.tol_comp = tight.tol_comp.min(T::DEFAULT_TOL_COMP);
         tight.polish |= T::DEFAULT_POLISH;
         // Exact steps for less: the interior point only to `SQP_LOOSE_QP_TOL`, then the
-        // active-set polish, which ends on the QP's exact solution once the interior point has
-        // its active set. A QP whose polish is refused (or that the polish does not handle:
-        // soft rows, the Riccati recursion in a solver with condensing storage) is solved
-        // again to `tight`, and the rest of this solve goes straight to `tight`.
+        // active-set polish with `tight`'s tolerances, which ends on the QP's exact solution
+        // once the interior point has its active set. A QP whose polish is refused (or that
+        // the polish does not handle: soft rows, the Riccati recursion in a solver with
+        // condensing storage) is solved again to `tight`, and the rest of this solve goes
+        // straight to `tight`.
         let mut loose = self.settings.sqp_loose_qps && !self.any_soft;
         let mut loose_settings = tight;
         let lt = T::lit(SQP_LOOSE_QP_TOL);
@@ -847,7 +848,7 @@ impl<
         loose_settings.tol_eq = lt.max(tight.tol_eq);
         loose_settings.tol_ineq = lt.max(tight.tol_ineq);
         loose_settings.tol_comp = lt.max(tight.tol_comp);
-        loose_settings.polish = true;
+        loose_settings.polish = false;
         for it in 0..self.settings.sqp_max_iter {
             self.linearize();
             let x_lin0 = self.x.first().copied().unwrap_or(*x0);
@@ -855,7 +856,10 @@ impl<
             if loose {
                 self.solver.settings = loose_settings;
                 last = self.solver.solve(&self.qp);
-                loose = last.status == QpStatus::Solved && self.solver.polished();
+                // Polished to `tight`'s tolerances (the Riccati recursion's polish checks
+                // its result against them).
+                self.solver.settings = tight;
+                loose = last.status == QpStatus::Solved && self.solver.polish(&self.qp);
             }
             if !loose {
                 self.solver.settings = tight;

@@ -1167,13 +1167,15 @@ fn the_first_newton_system_is_factorized_in_prepare() {
 /// clarabel's solution as the solve to the default tolerances does, from fewer interior-point
 /// iterations (the QP benchmark's `mpcc-condensed-polished` cases). Fixed draws of three
 /// sizes; draws clarabel finds nearly degenerate are not judged (as in the other
-/// comparisons), and every judged one must be polished and within 1e-7 relative. Returns
+/// comparisons), and every judged one must be polished and within 1e-7 relative, and so
+/// must the Riccati recursion's solution from the same loose interior point polished
+/// afterwards to the default tolerances (`QpSolver::polish`). Returns
 /// the draws judged and polished, the worst error, and the mean interior-point iterations
 /// of the loose solve and of one to the default tolerances.
 fn loose_then_polished<const NX: usize, const NU: usize, const N: usize>(
     seeds: core::ops::Range<u64>,
 ) -> (usize, usize, f64, f64, f64) {
-    let (mut judged, mut polished, mut worst) = (0, 0, 0.0f64);
+    let (mut judged, mut polished, mut riccati_polished, mut worst) = (0, 0, 0, 0.0f64);
     let (mut iterations, mut default_iterations) = (0.0, 0.0);
     for seed in seeds {
         let qp = control_bounded_qp::<NX, NU, N>(seed);
@@ -1195,6 +1197,19 @@ fn loose_then_polished<const NX: usize, const NU: usize, const N: usize>(
         assert!(solver.condensed());
         judged += 1;
         iterations += f64::from(info.iterations);
+        // The same by the Riccati recursion, polished afterwards (`QpSolver::polish`) to the
+        // default tolerances, which its polish checks.
+        let mut riccati = Box::new(QpSolver::<f64, NX, NU, 0, 0, N>::NEW);
+        riccati.settings = solver.settings;
+        riccati.settings.polish = false;
+        assert_eq!(riccati.solve(&qp).status, QpStatus::Solved, "seed {seed}");
+        riccati.settings = QpSettings::DEFAULT;
+        if riccati.polish(&qp) {
+            riccati_polished += 1;
+            let s = riccati.solution();
+            let xs: Vec<_> = (0..=N).map(|k| *s.state(k).unwrap()).collect();
+            worst = worst.max(compare(&reference, &s.u, &xs));
+        }
         let mut default = Box::new(QpSolver::<f64, NX, NU, 0, 0, N, N>::NEW);
         default.settings.method = QpMethod::Condensed;
         default_iterations += f64::from(default.solve(&qp).iterations);
@@ -1206,6 +1221,7 @@ fn loose_then_polished<const NX: usize, const NU: usize, const N: usize>(
         }
     }
     let n = judged.max(1) as f64;
+    assert_eq!(riccati_polished, judged, "a Riccati polish was refused");
     (
         judged,
         polished,
@@ -1216,7 +1232,7 @@ fn loose_then_polished<const NX: usize, const NU: usize, const N: usize>(
 }
 
 #[test]
-fn a_loose_interior_point_then_the_polish_solves_condensed_qps_exactly() {
+fn a_loose_interior_point_then_the_polish_solves_qps_exactly() {
     for (name, draws, (judged, polished, worst, loose, default)) in [
         ("4x2, N = 8", 150, loose_then_polished::<4, 2, 8>(0..150)),
         (
