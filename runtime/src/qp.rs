@@ -905,8 +905,8 @@ impl<
         info
     }
 
-    /// Polishes the last solve's solution of `qp` (which must be the QP solved) with the
-    /// current settings, as [`QpSettings::polish`] does at the end of a solve, whatever that
+    /// Polishes the last solve's solution of `qp` (which must be the QP solved, and the solve
+    /// must have returned [`QpStatus::Solved`]) with the current settings, as [`QpSettings::polish`] does at the end of a solve, whatever that
     /// setting: for an interior point stopped early on purpose and polished to tighter
     /// tolerances than it ran to (the polish of a QP solved by the Riccati recursion keeps
     /// its result only if it meets the tolerances). Returns whether the polish was kept
