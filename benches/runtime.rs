@@ -99,6 +99,10 @@ fn bench_qp<const N: usize>(c: &mut Criterion, dt: f64) {
         gap <= 1e-6,
         "polished solution {gap:e} from the default one"
     );
+    eprintln!(
+        "qp/N{N}: interior-point iterations {} to 1e-3 (then the polish), {} to the defaults",
+        info.iterations, tight.iterations
+    );
     group.bench_function(format!("mpcc-condensed-polished/N{N}"), |b| {
         b.iter(|| black_box(loose.solve(black_box(&qp))))
     });
@@ -138,6 +142,10 @@ fn bench_qp<const N: usize>(c: &mut Criterion, dt: f64) {
         .verbose(false)
         .build()
         .expect("settings");
+    let mut once =
+        DefaultSolver::new(&p, &d.q, &a, &d.b, &cones, settings.clone()).expect("clarabel setup");
+    once.solve();
+    eprintln!("qp/N{N}: clarabel iterations {}", once.info.iterations);
     group.bench_function(format!("clarabel/N{N}"), |b| {
         b.iter_custom(|iters| {
             let mut total = Duration::ZERO;
