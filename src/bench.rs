@@ -92,9 +92,12 @@ impl ClosedLoop {
 
 /// Flies QR-bench once with solver crate `$m` (its `Real` may be f32 or f64).
 macro_rules! fly {
-    ($m:ident, $sqp:expr) => {{
+    ($m:ident, $sqp:expr, $loose:expr) => {{
         use $m as m;
         let mut s = Box::new(m::Solver::new());
+        if let Some(loose) = $loose {
+            s.settings_mut().sqp_loose_qps = loose;
+        }
         let cast = |v: f64| v as m::Real;
         let x0: [m::Real; 10] = X0.map(cast);
         let _ = s.set_guess(&x0, &[0.0; 4]);
@@ -127,9 +130,12 @@ const POINTMASS: &str = "paper_pointmass (the paper's point-mass MPC: N = 10, dt
 
 /// Flies the point mass once: from rest at the origin to the reference 1 m along x (the
 /// closed loop of `cargo bench --bench generated -- pointmass`).
-fn fly_pointmass(sqp: bool) -> ClosedLoop {
+fn fly_pointmass(sqp: bool, loose: Option<bool>) -> ClosedLoop {
     use paper_pointmass as m;
     let mut s = Box::new(m::Solver::new());
+    if let Some(loose) = loose {
+        s.settings_mut().sqp_loose_qps = loose;
+    }
     let mut xref = [0.0; 9];
     xref[0] = 1.0;
     let mut out = ClosedLoop::new(m::DT, POINTMASS_COLUMNS, vec![0.0; 9]);
@@ -185,14 +191,20 @@ pub(crate) const CASES: [(usize, bool, &str); 6] = [
 ];
 
 /// Flies the closed loop of the given case.
-pub(crate) fn fly_case(horizon: usize, f32: bool, sqp: bool) -> Option<ClosedLoop> {
+/// `loose`: the SQP's `sqp_loose_qps` setting if given (else the solver's default).
+pub(crate) fn fly_case(
+    horizon: usize,
+    f32: bool,
+    sqp: bool,
+    loose: Option<bool>,
+) -> Option<ClosedLoop> {
     match (horizon, f32) {
-        (10, false) => Some(fly!(quadrotor_rates_a, sqp)),
-        (20, false) => Some(fly!(quadrotor_rates, sqp)),
-        (40, false) => Some(fly!(quadrotor_rates_n40, sqp)),
-        (10, true) => Some(fly!(quadrotor_rates_f32, sqp)),
-        (20, true) => Some(fly!(quadrotor_rates_b_f32, sqp)),
-        (40, true) => Some(fly!(quadrotor_rates_n40_f32, sqp)),
+        (10, false) => Some(fly!(quadrotor_rates_a, sqp, loose)),
+        (20, false) => Some(fly!(quadrotor_rates, sqp, loose)),
+        (40, false) => Some(fly!(quadrotor_rates_n40, sqp, loose)),
+        (10, true) => Some(fly!(quadrotor_rates_f32, sqp, loose)),
+        (20, true) => Some(fly!(quadrotor_rates_b_f32, sqp, loose)),
+        (40, true) => Some(fly!(quadrotor_rates_n40_f32, sqp, loose)),
         _ => None,
     }
 }
@@ -319,15 +331,28 @@ pub(crate) fn run(args: &BenchArgs) -> ExitCode {
         eprintln!("error: --rounds 0: run at least one round");
         return ExitCode::from(2);
     }
+    let loose = match args.sqp_qps.as_deref() {
+        None => None,
+        Some(_) if !args.sqp => {
+            eprintln!("error: --sqp-qps applies to the full SQP: add --sqp");
+            return ExitCode::from(2);
+        }
+        Some("loose") => Some(true),
+        Some("tight") => Some(false),
+        Some(other) => {
+            eprintln!("error: --sqp-qps {other}: use loose or tight");
+            return ExitCode::from(2);
+        }
+    };
     let mut prep = Vec::new();
     let mut feed = Vec::new();
     let mut total = Vec::new();
     let mut last = None;
     for _ in 0..args.rounds {
         let run = if pointmass {
-            fly_pointmass(args.sqp)
+            fly_pointmass(args.sqp, loose)
         } else {
-            let Some(run) = fly_case(args.horizon, args.f32, args.sqp) else {
+            let Some(run) = fly_case(args.horizon, args.f32, args.sqp, loose) else {
                 return ExitCode::FAILURE;
             };
             run

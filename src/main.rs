@@ -140,6 +140,11 @@ struct BenchArgs {
     /// Converged SQP at every step instead of one real-time iteration.
     #[arg(long)]
     sqp: bool,
+    /// With --sqp, how the SQP's QPs are solved: loose (the interior point to 1e-3, then the
+    /// active-set polish; the f64 default) or tight (the interior point to the QP
+    /// tolerances; the f32 default). `RtiSettings::sqp_loose_qps`.
+    #[arg(long, value_name = "loose|tight")]
+    sqp_qps: Option<String>,
     /// Closed loops to time (the figures pool every step of every round).
     #[arg(long, default_value_t = 20)]
     rounds: usize,

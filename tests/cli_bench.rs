@@ -67,6 +67,43 @@ fn converged_sqp_closed_loop_matches_casadi() {
     }
 }
 
+/// The SQP's QPs solved to the QP tolerances instead of loosely and polished (`--sqp-qps
+/// tight`, `RtiSettings::sqp_loose_qps = false`) converge to the same closed loop: CasADi's,
+/// and the default's within the SQP tolerance (but not bit for bit).
+#[test]
+fn tightly_solved_sqp_qps_fly_the_same_converged_closed_loop() {
+    let run = |mode: &str| {
+        let csv = tmp(&format!("bench_sqp_a_{mode}.csv"));
+        let (code, out, err) = mpcc(&[
+            "bench",
+            "--sqp",
+            "--sqp-qps",
+            mode,
+            "--rounds",
+            "1",
+            "--csv",
+            csv.to_str().unwrap(),
+        ]);
+        assert_eq!(code, Some(0), "{out}\n{err}");
+        states(&csv)
+    };
+    let (tight, loose) = (run("tight"), run("loose"));
+    let theirs = states(
+        &Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("tests/data")
+            .join("casadi_qrbench_A.csv"),
+    );
+    let d = max_position_difference(&tight, &theirs);
+    assert!(d < 1e-6, "tight: {d} m from CasADi's closed loop");
+    let d = max_position_difference(&tight, &loose);
+    assert!(d < 1e-6, "tight and loose QPs: {d} m apart");
+    // Different QP solutions (the polished ones are exact): the flag took effect.
+    assert!(
+        d > 0.0,
+        "--sqp-qps tight flew the loose closed loop bit for bit"
+    );
+}
+
 #[test]
 fn rti_json_and_csv_match_acados() {
     let csv = tmp("bench_rti_a.csv");
@@ -212,6 +249,14 @@ fn unsupported_cases_are_refused_with_what_exists() {
             "compiled in: --horizon 10 (f64)",
         ),
         (vec!["bench", "--rounds", "0"], "--rounds 0"),
+        (
+            vec!["bench", "--sqp-qps", "tight"],
+            "--sqp-qps applies to the full SQP: add --sqp",
+        ),
+        (
+            vec!["bench", "--sqp", "--sqp-qps", "exact"],
+            "--sqp-qps exact: use loose or tight",
+        ),
     ] {
         let (code, _, err) = mpcc(&args);
         assert_eq!(code, Some(2), "{args:?}: {err}");
