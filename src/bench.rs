@@ -39,6 +39,8 @@ pub(crate) struct ClosedLoop {
     pub prepare_us: Vec<f64>,
     pub feedback_us: Vec<f64>,
     pub qp_iterations: Vec<u32>,
+    /// Active-set solves of each step's (last) QP (`QpInfo::active_set_solves`).
+    pub active_set_solves: Vec<u32>,
     pub sqp_iterations: Vec<u32>,
     /// Steps whose full SQP stopped at its iteration limit (SQP mode; the iterate is kept).
     pub sqp_limit_steps: usize,
@@ -51,6 +53,7 @@ pub(crate) struct ClosedLoop {
 struct Step {
     status: RtiStatus,
     qp_iterations: u32,
+    active_set_solves: u32,
     sqp_iterations: u32,
     times: [Instant; 3],
 }
@@ -66,6 +69,7 @@ impl ClosedLoop {
             prepare_us: Vec::new(),
             feedback_us: Vec::new(),
             qp_iterations: Vec::new(),
+            active_set_solves: Vec::new(),
             sqp_iterations: Vec::new(),
             sqp_limit_steps: 0,
             all_ok: true,
@@ -85,18 +89,32 @@ impl ClosedLoop {
         self.prepare_us.push((t1 - t0).as_secs_f64() * 1e6);
         self.feedback_us.push((t2 - t1).as_secs_f64() * 1e6);
         self.qp_iterations.push(step.qp_iterations);
+        self.active_set_solves.push(step.active_set_solves);
         self.controls.push(u);
         self.states.push(x);
     }
 }
 
+/// Settings the command line overrides (else the solver's defaults).
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct Overrides {
+    /// `RtiSettings::sqp_loose_qps` (`--sqp-qps`).
+    pub loose: Option<bool>,
+    /// `QpSettings::warm_active_set` (`--warm-active-set`).
+    pub warm_active_set: Option<bool>,
+}
+
 /// Flies QR-bench once with solver crate `$m` (its `Real` may be f32 or f64).
 macro_rules! fly {
-    ($m:ident, $sqp:expr, $loose:expr) => {{
+    ($m:ident, $sqp:expr, $over:expr) => {{
         use $m as m;
         let mut s = Box::new(m::Solver::new());
-        if let Some(loose) = $loose {
+        let over: Overrides = $over;
+        if let Some(loose) = over.loose {
             s.settings_mut().sqp_loose_qps = loose;
+        }
+        if let Some(warm) = over.warm_active_set {
+            s.settings_mut().qp.warm_active_set = warm;
         }
         let cast = |v: f64| v as m::Real;
         let x0: [m::Real; 10] = X0.map(cast);
@@ -114,6 +132,7 @@ macro_rules! fly {
             let step = Step {
                 status: info.status,
                 qp_iterations: info.qp.iterations,
+                active_set_solves: info.qp.active_set_solves,
                 sqp_iterations: info.sqp_iterations,
                 times: [t0, t1, Instant::now()],
             };
@@ -130,11 +149,14 @@ const POINTMASS: &str = "paper_pointmass (the paper's point-mass MPC: N = 10, dt
 
 /// Flies the point mass once: from rest at the origin to the reference 1 m along x (the
 /// closed loop of `cargo bench --bench generated -- pointmass`).
-fn fly_pointmass(sqp: bool, loose: Option<bool>) -> ClosedLoop {
+fn fly_pointmass(sqp: bool, over: Overrides) -> ClosedLoop {
     use paper_pointmass as m;
     let mut s = Box::new(m::Solver::new());
-    if let Some(loose) = loose {
+    if let Some(loose) = over.loose {
         s.settings_mut().sqp_loose_qps = loose;
+    }
+    if let Some(warm) = over.warm_active_set {
+        s.settings_mut().qp.warm_active_set = warm;
     }
     let mut xref = [0.0; 9];
     xref[0] = 1.0;
@@ -150,6 +172,7 @@ fn fly_pointmass(sqp: bool, loose: Option<bool>) -> ClosedLoop {
         let step = Step {
             status: info.status,
             qp_iterations: info.qp.iterations,
+            active_set_solves: info.qp.active_set_solves,
             sqp_iterations: info.sqp_iterations,
             times: [t0, t1, Instant::now()],
         };
@@ -191,20 +214,20 @@ pub(crate) const CASES: [(usize, bool, &str); 6] = [
 ];
 
 /// Flies the closed loop of the given case.
-/// `loose`: the SQP's `sqp_loose_qps` setting if given (else the solver's default).
+/// `over`: settings to override (else the solver's defaults).
 pub(crate) fn fly_case(
     horizon: usize,
     f32: bool,
     sqp: bool,
-    loose: Option<bool>,
+    over: Overrides,
 ) -> Option<ClosedLoop> {
     match (horizon, f32) {
-        (10, false) => Some(fly!(quadrotor_rates_a, sqp, loose)),
-        (20, false) => Some(fly!(quadrotor_rates, sqp, loose)),
-        (40, false) => Some(fly!(quadrotor_rates_n40, sqp, loose)),
-        (10, true) => Some(fly!(quadrotor_rates_f32, sqp, loose)),
-        (20, true) => Some(fly!(quadrotor_rates_b_f32, sqp, loose)),
-        (40, true) => Some(fly!(quadrotor_rates_n40_f32, sqp, loose)),
+        (10, false) => Some(fly!(quadrotor_rates_a, sqp, over)),
+        (20, false) => Some(fly!(quadrotor_rates, sqp, over)),
+        (40, false) => Some(fly!(quadrotor_rates_n40, sqp, over)),
+        (10, true) => Some(fly!(quadrotor_rates_f32, sqp, over)),
+        (20, true) => Some(fly!(quadrotor_rates_b_f32, sqp, over)),
+        (40, true) => Some(fly!(quadrotor_rates_n40_f32, sqp, over)),
         _ => None,
     }
 }
@@ -251,6 +274,11 @@ struct Report {
     total_us: Stats,
     qp_iterations_mean: f64,
     qp_iterations_max: u32,
+    /// Steps whose (last) QP needed the interior point.
+    qp_interior_point_steps: usize,
+    /// Active-set solves per step (`QpInfo::active_set_solves`): the warm active set and
+    /// the active-set iterations after it.
+    qp_active_set_solves_mean: f64,
     sqp_iterations_mean: f64,
     sqp_limit_steps: usize,
     final_position_error_m: f64,
@@ -344,15 +372,28 @@ pub(crate) fn run(args: &BenchArgs) -> ExitCode {
             return ExitCode::from(2);
         }
     };
+    let warm_active_set = match args.warm_active_set.as_deref() {
+        None => None,
+        Some("on") => Some(true),
+        Some("off") => Some(false),
+        Some(other) => {
+            eprintln!("error: --warm-active-set {other}: use on or off");
+            return ExitCode::from(2);
+        }
+    };
+    let over = Overrides {
+        loose,
+        warm_active_set,
+    };
     let mut prep = Vec::new();
     let mut feed = Vec::new();
     let mut total = Vec::new();
     let mut last = None;
     for _ in 0..args.rounds {
         let run = if pointmass {
-            fly_pointmass(args.sqp, loose)
+            fly_pointmass(args.sqp, over)
         } else {
-            let Some(run) = fly_case(args.horizon, args.f32, args.sqp, loose) else {
+            let Some(run) = fly_case(args.horizon, args.f32, args.sqp, over) else {
                 return ExitCode::FAILURE;
             };
             run
@@ -421,6 +462,13 @@ pub(crate) fn run(args: &BenchArgs) -> ExitCode {
         total_us: Stats::of(&total),
         qp_iterations_mean: iters.iter().sum::<f64>() / iters.len().max(1) as f64,
         qp_iterations_max: run.qp_iterations.iter().copied().max().unwrap_or(0),
+        qp_interior_point_steps: run.qp_iterations.iter().filter(|&&i| i > 0).count(),
+        qp_active_set_solves_mean: run
+            .active_set_solves
+            .iter()
+            .map(|&i| f64::from(i))
+            .sum::<f64>()
+            / run.active_set_solves.len().max(1) as f64,
         sqp_iterations_mean: run
             .sqp_iterations
             .iter()
@@ -470,7 +518,8 @@ pub(crate) fn run(args: &BenchArgs) -> ExitCode {
             );
         }
         println!(
-            "QP iterations per step{}: mean {:.2}, max {}; final position error {:.3e} m{}",
+            "QP per step{}: interior-point iterations mean {:.2}, max {} (in {} of {} steps); \
+             active-set solves mean {:.2}",
             if args.sqp {
                 " (last QP of each step)"
             } else {
@@ -478,6 +527,12 @@ pub(crate) fn run(args: &BenchArgs) -> ExitCode {
             },
             report.qp_iterations_mean,
             report.qp_iterations_max,
+            report.qp_interior_point_steps,
+            report.steps,
+            report.qp_active_set_solves_mean,
+        );
+        println!(
+            "final position error {:.3e} m{}",
             report.final_position_error_m,
             if report.all_ok {
                 String::new()

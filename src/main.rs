@@ -145,6 +145,12 @@ struct BenchArgs {
     /// tolerances; the f32 default). `RtiSettings::sqp_loose_qps`.
     #[arg(long, value_name = "loose|tight")]
     sqp_qps: Option<String>,
+    /// How each QP starts: on (the default) from the last QP's active set, factorized in the
+    /// preparation phase (condensed QPs; the interior point only where that set and the
+    /// active-set iterations after it miss); off: every QP by the interior point.
+    /// `QpSettings::warm_active_set`.
+    #[arg(long, value_name = "on|off")]
+    warm_active_set: Option<String>,
     /// Closed loops to time (the figures pool every step of every round).
     #[arg(long, default_value_t = 20)]
     rounds: usize,

@@ -319,7 +319,12 @@ fn qr_bench_on_aarch64_matches_the_host() {
         assert_eq!(h["all_ok"], Value::Bool(true), "{name}: host {h}");
         assert_eq!(h["all_ok"], a["all_ok"], "{name}: all_ok");
         assert_eq!(h["steps"], a["steps"], "{name}: steps");
-        for key in ["qp_iterations_mean", "qp_iterations_max"] {
+        for key in [
+            "qp_iterations_mean",
+            "qp_iterations_max",
+            "qp_interior_point_steps",
+            "qp_active_set_solves_mean",
+        ] {
             assert_eq!(h[key], a[key], "{name}: {key}");
         }
         let (eh, ea) = (

@@ -128,16 +128,49 @@ fn rti_json_and_csv_match_acados() {
     }
     assert_eq!(v["steps"], 100);
     assert_eq!(v["all_ok"], serde_json::Value::Bool(true));
+    // The warm active set (the default): the interior point in the first step only (no
+    // active set yet), then one solve on the last step's active set, a few more where
+    // it changes.
     let iters = v["qp_iterations_mean"].as_f64().unwrap();
-    assert!((1.0..10.0).contains(&iters), "{iters}");
+    assert!(iters > 0.0 && iters < 0.2, "{iters}");
+    assert_eq!(v["qp_interior_point_steps"], 1, "{v}");
+    let solves = v["qp_active_set_solves_mean"].as_f64().unwrap();
+    assert!((0.99..1.5).contains(&solves), "{solves}");
     // acados' final position error for A is 2.37e-3 m.
     let e = v["final_position_error_m"].as_f64().unwrap();
     assert!((e - 2.37e-3).abs() < 1e-5, "{e}");
-    let d = max_position_difference(
-        &states(&csv),
-        &states(&Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/acados_qrbench_A.csv")),
-    );
+    let acados =
+        states(&Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/acados_qrbench_A.csv"));
+    let d = max_position_difference(&states(&csv), &acados);
     assert!(d < 1e-4, "{d} m from acados' RTI closed loop");
+
+    // Every QP by the interior point: its iterations, no active-set solve, the same closed
+    // loop to the interior point's tolerance.
+    let off = tmp("bench_rti_a_off.csv");
+    let (code, out, err) = mpcc(&[
+        "bench",
+        "--rounds",
+        "1",
+        "--json",
+        "--warm-active-set",
+        "off",
+        "--csv",
+        off.to_str().unwrap(),
+    ]);
+    assert_eq!(code, Some(0), "{err}");
+    let v: serde_json::Value = serde_json::from_str(out.trim()).expect("one JSON object");
+    let iters = v["qp_iterations_mean"].as_f64().unwrap();
+    assert!((1.0..10.0).contains(&iters), "{iters}");
+    assert_eq!(v["qp_interior_point_steps"], 100, "{v}");
+    assert_eq!(v["qp_active_set_solves_mean"].as_f64(), Some(0.0), "{v}");
+    let d = max_position_difference(&states(&off), &states(&csv));
+    assert!(
+        d < 1e-5 && d > 0.0,
+        "{d} m from the warm active set's closed loop"
+    );
+    let (code, _, err) = mpcc(&["bench", "--rounds", "1", "--warm-active-set", "maybe"]);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("use on or off"), "{err}");
 }
 
 #[test]

@@ -6,7 +6,8 @@
 //!
 //! It prints the number of steps, the mean QP iterations and the final position error.
 //! Environment: `COLD=1` starts every QP cold, `TOL=1e-6` loosens the QP tolerances,
-//! `POLISH=1` polishes every QP's solution (`QpSettings::polish`),
+//! `POLISH=1` polishes every QP's solution (`QpSettings::polish`), `WARM_SET=0` turns off
+//! the warm active set (`QpSettings::warm_active_set`: every QP by the interior point),
 //! `METHOD=riccati` or `METHOD=condensed` forces how the QPs are solved (default: the solver's
 //! automatic choice, with storage for condensing).
 
@@ -49,18 +50,24 @@ fn run<const N: usize>(dt: f64, steps: usize) {
     }
     // POLISH=1: the active-set polish after every QP (off by default in f64).
     s.settings.qp.polish = std::env::var_os("POLISH").is_some();
+    // WARM_SET=0: no warm active set (on by default in a real-time iteration).
+    s.settings.qp.warm_active_set = std::env::var("WARM_SET").as_deref() != Ok("0");
     let mut x = SVector::from(X0);
-    let mut iterations = 0u32;
+    let (mut iterations, mut solves, mut interior) = (0u32, 0u32, 0u32);
     for _ in 0..steps {
         s.prepare();
         let (u, info) = s.feedback(&x);
         assert_eq!(info.status, RtiStatus::Ok);
         iterations += info.qp.iterations;
+        solves += info.qp.active_set_solves;
+        interior += u32::from(info.qp.iterations > 0);
         x = plant(&x, &u, dt, 10);
     }
     let err = ((x[0] - 4.0).powi(2) + x[1].powi(2) + (x[2] - 2.0).powi(2)).sqrt();
     println!(
-        "steps {steps}, mean QP iterations {:.2}, final position error {err:.3e} m",
-        f64::from(iterations) / steps as f64
+        "steps {steps}, mean QP iterations {:.2}, mean active-set solves {:.2}, \
+         interior point in {interior} steps, final position error {err:.3e} m",
+        f64::from(iterations) / steps as f64,
+        f64::from(solves) / steps as f64
     );
 }

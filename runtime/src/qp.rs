@@ -331,6 +331,20 @@ pub struct QpSettings<T> {
     /// the Riccati recursion in a solver with condensing storage (`NC = N`). Default:
     /// [`Real::DEFAULT_POLISH`].
     pub polish: bool,
+    /// Condensed QPs: start from the last solve's active set (which control bounds held).
+    /// [`QpSolver::prepare`] factorizes the condensed Hessian with those entries held on
+    /// their bounds, which does not depend on `x0`; [`QpSolver::solve_prepared`] then solves
+    /// the QP on that set by substitution and keeps the result if it is the QP's solution
+    /// (every bound holds and the held entries' multipliers have their signs, to the
+    /// tolerances). Otherwise primal-dual active-set iterations start from it (at most 4,
+    /// one factorization each, as in the polish), and if they do not end on the solution
+    /// either, the interior point solves the QP. A real-time iteration's QPs change little
+    /// from one control step to the next, so the set usually holds and the feedback is a
+    /// few products. The solution is exact where the set holds; [`QpInfo::iterations`] is
+    /// then 0 and [`QpInfo::active_set_solves`] counts the solves. No effect on QPs solved
+    /// by the Riccati recursion. Default: off ([`RtiSettings::DEFAULT`](crate::RtiSettings)
+    /// turns it on).
+    pub warm_active_set: bool,
 }
 
 /// Whether condensing a QP with these dimensions is estimated cheaper per interior-point
@@ -388,6 +402,7 @@ impl<T: Real> QpSettings<T> {
         refine: T::DEFAULT_REFINE,
         method: QpMethod::Auto,
         polish: T::DEFAULT_POLISH,
+        warm_active_set: false,
     };
 
     /// Every setting zero (`max_iter` 0): the settings of a zero-filled solver
@@ -405,6 +420,7 @@ impl<T: Real> QpSettings<T> {
         refine: 0,
         method: QpMethod::Auto,
         polish: false,
+        warm_active_set: false,
     };
 }
 
@@ -439,8 +455,13 @@ pub enum QpStatus {
 pub struct QpInfo<T> {
     /// How the solve ended.
     pub status: QpStatus,
-    /// Interior-point iterations taken.
+    /// Interior-point iterations taken (0 when the warm active set or the active-set
+    /// iterations after it solved the QP: [`QpSettings::warm_active_set`]).
     pub iterations: u32,
+    /// Solves on an active set before the interior point ([`QpSettings::warm_active_set`]):
+    /// 1 when the last solve's set held, more for each active-set iteration after it, 0
+    /// without a warm active set.
+    pub active_set_solves: u32,
     /// Stationarity residual (infinity norm).
     pub res_stat: T,
     /// Dynamics residual.
@@ -555,6 +576,17 @@ pub struct QpSolver<
     /// Newton system, with the settings `prefactor_settings`; the next solve uses it.
     prefactored: bool,
     prefactor_settings: QpSettings<T>,
+    /// The control bounds held in the last condensed solution (lower, upper), valid when
+    /// `act_valid` ([`QpSettings::warm_active_set`]).
+    act_lo: [[bool; NU]; NC],
+    act_hi: [[bool; NU]; NC],
+    act_valid: bool,
+    /// The last [`prepare`](Self::prepare) factorized the condensed Hessian on the stored
+    /// active set (with the settings `prefactor_settings`); the next solve starts there.
+    guessed: bool,
+    /// The last solution came from an active set and is exact (its multipliers `H u + g`
+    /// are in `hu`).
+    on_active_set: bool,
     /// Condensed Hessian and the Cholesky factor of `H + Sigma`, sharing one array of blocks:
     /// `H_ij` (`i >= j`) at `[j][i]`, on and above the diagonal, and the factor's `L_ij`
     /// (`i > j`) at `[i][j]`, below it; the factor's diagonal blocks apart (`ld`: `L_ii^-1`).
@@ -696,6 +728,11 @@ impl<
         polished: false,
         prefactored: false,
         prefactor_settings: QpSettings::ZERO,
+        act_lo: [[false; NU]; NC],
+        act_hi: [[false; NU]; NC],
+        act_valid: false,
+        guessed: false,
+        on_active_set: false,
         tri: [[crate::zeros(); NC]; NC],
         ld: [crate::zeros(); NC],
         gc: [crate::zeros(); NC],
@@ -820,6 +857,7 @@ impl<
         QpInfo {
             status,
             iterations,
+            active_set_solves: 0,
             res_stat: res[0],
             res_eq: res[1],
             res_ineq: res[2],
@@ -846,10 +884,20 @@ impl<
     /// are not prepared, and `solve_prepared` then reports them.
     pub fn prepare<const NH: usize>(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>) {
         self.prefactored = false;
+        self.guessed = false;
         self.condensed = self.condensing_applies(qp)
             && self.check_stages(qp)
             && self.load_bounds(qp).is_ok()
             && self.condense(qp);
+        // The last solve's active set, factorized: the solve starts there (and the interior
+        // point, if it is needed, from scratch).
+        if self.condensed && self.settings.warm_active_set && self.act_valid {
+            self.guessed = self.prepare_active_set();
+            self.prefactor_settings = self.settings;
+            if self.guessed {
+                return;
+            }
+        }
         // The interior point's starting point and its first Newton system depend on `x0`
         // only through stage 0's general rows: without them both are built here.
         let ready =
@@ -870,11 +918,30 @@ impl<
         &mut self,
         qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>,
     ) -> QpInfo<T> {
-        let info = self.iterate(qp);
+        self.on_active_set = false;
+        let guessed = core::mem::replace(&mut self.guessed, false)
+            && self.condensed
+            && self.prefactor_settings == self.settings;
+        let mut solves = 0;
+        if guessed {
+            match self.solve_on_warm_active_set(qp) {
+                Ok(info) => return info,
+                Err(n) => solves = n,
+            }
+        }
+        let mut info = self.iterate(qp);
+        info.active_set_solves = solves;
         let polish = self.settings.polish && info.status == QpStatus::Solved;
         if self.condensed && info.status != QpStatus::NonFiniteInput {
             if polish {
                 self.polished = self.condensed_polish();
+            }
+            if info.status == QpStatus::Solved {
+                if !self.polished {
+                    self.active_set_of_interior_point();
+                }
+            } else {
+                self.act_valid = false;
             }
             self.expand(qp);
             return info;
@@ -915,6 +982,12 @@ impl<
     /// storage, are not polished.
     pub fn polish<const NH: usize>(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>) -> bool {
         self.polished = false;
+        // A solution from the warm active set is exact: it only needs checking against
+        // these settings' tolerances.
+        if self.condensed && self.on_active_set && self.active_set_solution_optimal() {
+            self.polished = true;
+            return true;
+        }
         if self.condensed {
             self.polished = self.condensed_polish();
             self.expand(qp);

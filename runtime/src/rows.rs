@@ -178,6 +178,46 @@ impl<T: Real, const K: usize> Rows<T, K> {
         }
     }
 
+    /// The rows of an exact solution `v` on an active set, with the bounds' multipliers
+    /// `mu` (`lam_l - lam_u`): slacks from `v` (zero on the held bounds), multipliers
+    /// `max(mu, 0)` on the held lower bounds and `max(-mu, 0)` on the held upper ones, zero on
+    /// the others (a dual warm start floors them).
+    pub fn hold(
+        &mut self,
+        v: &SVector<T, K>,
+        mu: &SVector<T, K>,
+        lower: &[bool; K],
+        upper: &[bool; K],
+    ) {
+        if !self.any {
+            self.clear();
+            return;
+        }
+        self.dirty = true;
+        for i in 0..K {
+            (self.tl[i], self.ll[i]) = if self.has_lo[i] {
+                let lam = if lower[i] {
+                    mu[i].max(T::ZERO)
+                } else {
+                    T::ZERO
+                };
+                ((v[i] - self.lo[i]).max(T::ZERO), lam)
+            } else {
+                (T::ONE, T::ZERO)
+            };
+            (self.tu[i], self.lu[i]) = if self.has_hi[i] {
+                let lam = if upper[i] {
+                    (-mu[i]).max(T::ZERO)
+                } else {
+                    T::ZERO
+                };
+                ((self.hi[i] - v[i]).max(T::ZERO), lam)
+            } else {
+                (T::ONE, T::ZERO)
+            };
+        }
+    }
+
     /// Every side absent: slacks 1, multipliers, residuals and directions 0 (nothing to do
     /// if no side has been started since the last clear, or ever).
     fn clear(&mut self) {

@@ -59,6 +59,7 @@ impl<T: Real> RtiSettings<T> {
             tol_ineq: T::RTI_TOL,
             tol_comp: T::RTI_TOL_COMP,
             polish: false,
+            warm_active_set: true,
             ..QpSettings::DEFAULT
         },
         shift: false,
@@ -112,6 +113,7 @@ impl<T: Real> RtiInfo<T> {
         qp: QpInfo {
             status: QpStatus::Solved,
             iterations: 0,
+            active_set_solves: 0,
             res_stat: T::ZERO,
             res_eq: T::ZERO,
             res_ineq: T::ZERO,
@@ -604,6 +606,7 @@ impl<
             self.u[k] = self.u[k + 1];
         }
         self.x[N - 1] = self.xn;
+        self.solver.shift_active_set();
     }
 
     /// Preparation phase: linearizes dynamics, cost and constraints of every stage around the
@@ -696,6 +699,7 @@ impl<
         let empty = QpInfo {
             status: QpStatus::NonFiniteInput,
             iterations: 0,
+            active_set_solves: 0,
             res_stat: T::ZERO,
             res_eq: T::ZERO,
             res_ineq: T::ZERO,
@@ -819,6 +823,7 @@ impl<
         let empty = QpInfo {
             status: QpStatus::NonFiniteInput,
             iterations: 0,
+            active_set_solves: 0,
             res_stat: T::ZERO,
             res_eq: T::ZERO,
             res_ineq: T::ZERO,

@@ -1258,3 +1258,197 @@ fn a_loose_interior_point_then_the_polish_solves_qps_exactly() {
         );
     }
 }
+
+/// Outcome counts of [`warm_active_set_sequence`].
+#[derive(Debug, Default)]
+struct WarmSetCounts {
+    /// Follow-up QPs judged (a reference solution, not nearly degenerate).
+    judged: usize,
+    /// Solved on the last solve's active set, no other solve.
+    held: usize,
+    /// Solved by active-set iterations after the warm set.
+    iterated: usize,
+    /// Solved by the interior point after the active-set solves.
+    interior: usize,
+    /// Largest difference from clarabel (relative, as [`compare`]).
+    worst: f64,
+}
+
+/// Sequences of related control-bounded QPs as a real-time iteration meets them: each draw's
+/// QP, then 6 more with `x0` and the gradients moved by random amounts of size `step`. A
+/// condensing solver with the warm active set solves them in turn; every follow-up must be
+/// solved within the tolerances and, where judged, match clarabel to 1e-7 (relative), and
+/// its result must match the interior point's from scratch. Counts how each was solved.
+fn warm_active_set_sequence<const NX: usize, const NU: usize, const N: usize>(
+    seeds: core::ops::Range<u64>,
+    step: f64,
+) -> WarmSetCounts {
+    let mut counts = WarmSetCounts::default();
+    for seed in seeds {
+        let base = control_bounded_qp::<NX, NU, N>(seed);
+        let mut solver = Box::new(QpSolver::<f64, NX, NU, 0, 0, N, N>::NEW);
+        solver.settings.method = QpMethod::Condensed;
+        solver.settings.warm_active_set = true;
+        solver.settings.tol_stat = 1e-10;
+        solver.settings.tol_comp = 1e-12;
+        let first = solver.solve(&base);
+        assert_eq!(first.status, QpStatus::Solved, "seed {seed}");
+        assert_eq!(
+            first.active_set_solves, 0,
+            "no active set before the first solve"
+        );
+        let mut rng = support::Rng::new(seed ^ 0x5eed);
+        let mut qp = base;
+        for j in 0..6 {
+            qp.x0 += rng.vec::<NX>(step);
+            for s in qp.stages.iter_mut() {
+                s.gu += rng.vec::<NU>(step);
+                s.gx += rng.vec::<NX>(step);
+            }
+            let info = solver.solve(&qp);
+            assert_eq!(
+                info.status,
+                QpStatus::Solved,
+                "seed {seed}, QP {j}: {info:?}"
+            );
+            let st = &solver.settings;
+            assert!(
+                info.res_stat <= st.tol_stat && info.res_ineq <= st.tol_ineq,
+                "seed {seed}, QP {j}: {info:?}"
+            );
+            assert!(
+                info.active_set_solves >= 1,
+                "seed {seed}, QP {j}: no warm set"
+            );
+            match (info.iterations, info.active_set_solves) {
+                (0, 1) => counts.held += 1,
+                (0, _) => counts.iterated += 1,
+                _ => counts.interior += 1,
+            }
+            // The interior point from scratch, polished: the same solution.
+            let mut scratch = Box::new(QpSolver::<f64, NX, NU, 0, 0, N, N>::NEW);
+            scratch.settings = solver.settings;
+            scratch.settings.warm_active_set = false;
+            scratch.settings.polish = true;
+            assert_eq!(scratch.solve(&qp).status, QpStatus::Solved);
+            let (a, b) = (solver.solution(), scratch.solution());
+            for k in 0..N {
+                let d = (a.u[k] - b.u[k]).amax();
+                assert!(
+                    d <= 1e-7 * b.u[k].amax().max(1.0),
+                    "seed {seed}, QP {j}, stage {k}: {d:e}"
+                );
+            }
+            let Some(reference) = clarabel_solve(&qp) else {
+                continue;
+            };
+            if reference.strict_complementarity <= 1e-3 {
+                continue;
+            }
+            counts.judged += 1;
+            let s = solver.solution();
+            let xs: Vec<_> = (0..=N).map(|k| *s.state(k).unwrap()).collect();
+            counts.worst = counts.worst.max(compare(&reference, &s.u, &xs));
+        }
+    }
+    counts
+}
+
+/// The warm active set ([`QpSettings::warm_active_set`]) on sequences of related QPs: small
+/// changes (as between control steps) are solved on the last active set in most cases; large
+/// ones need the active-set iterations or the interior point, and every path ends on
+/// clarabel's solution.
+#[test]
+fn the_warm_active_set_solves_related_qps_exactly() {
+    let small = warm_active_set_sequence::<10, 4, 10>(0..30, 0.01);
+    let large = warm_active_set_sequence::<10, 4, 10>(0..30, 0.5);
+    let jumps = warm_active_set_sequence::<3, 4, 4>(0..400, 5.0);
+    let other = warm_active_set_sequence::<6, 3, 20>(0..20, 0.2);
+    eprintln!(
+        "small steps: {small:?}\nlarge steps: {large:?}\njumps: {jumps:?}\n6x3, N = 20: {other:?}"
+    );
+    for (name, c) in [
+        ("small", &small),
+        ("large", &large),
+        ("jumps", &jumps),
+        ("6x3", &other),
+    ] {
+        assert!(c.judged >= 60, "{name}: {} judged", c.judged);
+        assert!(c.worst <= 1e-7, "{name}: {:e} from clarabel", c.worst);
+    }
+    let total = |c: &WarmSetCounts| c.held + c.iterated + c.interior;
+    assert!(
+        10 * small.held >= 8 * total(&small),
+        "small steps: the last active set held in {} of {}",
+        small.held,
+        total(&small)
+    );
+    // Every path was taken.
+    assert!(large.iterated > 0, "large steps: {large:?}");
+    assert!(jumps.interior > 0, "jumps: {jumps:?}");
+}
+
+/// Bounds removed between solves leave the warm active set without them (the entries they
+/// held are free), and a non-finite `x0` after a prepared warm set is reported and leaves no
+/// trace: the next valid solve gives the solution a new solver finds.
+#[test]
+fn the_warm_active_set_follows_the_bounds_and_survives_bad_input() {
+    type S = QpSolver<f64, 4, 2, 0, 0, 8, 8>;
+    let mut qp = control_bounded_qp::<4, 2, 8>(3);
+    let mut solver = Box::new(S::NEW);
+    solver.settings.method = QpMethod::Condensed;
+    solver.settings.warm_active_set = true;
+    assert_eq!(solver.solve(&qp).status, QpStatus::Solved);
+    // Some bound is active: find one by the solution and remove it.
+    let (k, i, upper) = (0..8)
+        .flat_map(|k| (0..2).map(move |i| (k, i)))
+        .find_map(|(k, i)| {
+            let (u, s) = (solver.solution().u[k][i], &qp.stages[k]);
+            if (u - s.lbu[i]).abs() < 1e-6 {
+                Some((k, i, false))
+            } else if (s.ubu[i] - u).abs() < 1e-6 {
+                Some((k, i, true))
+            } else {
+                None
+            }
+        })
+        .expect("no active bound in the draw");
+    if upper {
+        qp.stages[k].ubu[i] = f64::INFINITY;
+    } else {
+        qp.stages[k].lbu[i] = f64::NEG_INFINITY;
+    }
+    let fresh = |qp: &OcpQp<f64, 4, 2, 0, 0, 8>| {
+        let mut s = Box::new(S::NEW);
+        s.settings.method = QpMethod::Condensed;
+        s.settings.polish = true;
+        assert_eq!(s.solve(qp).status, QpStatus::Solved);
+        s.solution().u
+    };
+    let close = |a: &[SVector<f64, 2>; 8], b: &[SVector<f64, 2>; 8]| {
+        a.iter()
+            .zip(b)
+            .all(|(x, y)| (x - y).amax() <= 1e-7 * y.amax().max(1.0))
+    };
+    let info = solver.solve(&qp);
+    assert_eq!(info.status, QpStatus::Solved, "{info:?}");
+    assert!(info.active_set_solves >= 1);
+    let u = solver.solution().u;
+    assert!(close(&u, &fresh(&qp)), "bound removed: {u:?}");
+    let moved = if upper {
+        u[k][i] > qp.stages[k].lbu[i]
+    } else {
+        true
+    };
+    assert!(moved);
+
+    solver.prepare(&qp);
+    let mut bad = qp;
+    bad.x0[1] = f64::NAN;
+    let info = solver.solve_prepared(&bad);
+    assert_eq!(info.status, QpStatus::NonFiniteInput, "{info:?}");
+    qp.x0[1] += 0.01;
+    let info = solver.solve(&qp);
+    assert_eq!(info.status, QpStatus::Solved, "{info:?}");
+    assert!(close(&solver.solution().u, &fresh(&qp)));
+}

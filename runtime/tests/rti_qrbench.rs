@@ -383,3 +383,68 @@ fn unconfigured_then_configured_is_new() {
     fly::<f64, 10>();
     fly::<f32, 10>();
 }
+
+/// The warm active set (on by default in the real-time iteration; condensed QPs): config A's
+/// closed loop flies as with every QP solved by the interior point, within 1e-5 in every state
+/// at every step (the interior point stops at 1e-6, the active set is exact), with the trajectory shifted between steps
+/// (the stored active set shifted with it) and without; after the first step, which has no
+/// active set to start from, at most a few steps need the interior point, and the shifted
+/// active set holds more often than the one left in place would. In f32 the same
+/// loop stays within 1e-3 of f64.
+#[test]
+fn the_warm_active_set_flies_the_interior_points_closed_loop() {
+    let dt = 0.04;
+    for shift in [false, true] {
+        let mut warm = qrbench_in::<f64, 10, 10>(dt);
+        let mut ipm = qrbench_in::<f64, 10, 10>(dt);
+        let mut single = qrbench_in::<f32, 10, 10>(dt);
+        for s in [&mut warm.settings, &mut ipm.settings] {
+            s.shift = shift;
+            s.qp.method = QpMethod::Condensed;
+        }
+        single.settings.shift = shift;
+        single.settings.qp.method = QpMethod::Condensed;
+        assert!(warm.settings.qp.warm_active_set && single.settings.qp.warm_active_set);
+        ipm.settings.qp.warm_active_set = false;
+        let (mut xw, mut xi, mut xs) = (SVector::from(X0), SVector::from(X0), SVector::from(X0));
+        let (mut interior, mut held) = (0, 0);
+        for k in 0..100 {
+            warm.prepare();
+            let (uw, info) = warm.feedback(&xw);
+            assert_eq!(info.status, RtiStatus::Ok, "step {k}: {info:?}");
+            assert!(warm.condensed());
+            if k > 0 {
+                assert!(info.qp.active_set_solves >= 1, "step {k}: {info:?}");
+                interior += usize::from(info.qp.iterations > 0);
+                held += usize::from(info.qp.iterations == 0 && info.qp.active_set_solves == 1);
+            }
+            ipm.prepare();
+            let (ui, info) = ipm.feedback(&xi);
+            assert_eq!((info.status, info.qp.active_set_solves), (RtiStatus::Ok, 0));
+            single.prepare();
+            let (us, info) = single.feedback(&xs.cast());
+            assert_eq!(info.status, RtiStatus::Ok, "f32 step {k}: {info:?}");
+            xw = plant(&xw, &uw, dt, 10);
+            xi = plant(&xi, &ui, dt, 10);
+            xs = plant(&xs, &us.cast(), dt, 10);
+            let d = (xw - xi).amax();
+            assert!(
+                d <= 1e-5,
+                "shift {shift}, step {k}: {d:e} from the interior point's"
+            );
+            let d = (xs - xw).amax();
+            assert!(d <= 1e-3, "shift {shift}, step {k}: f32 {d:e} from f64");
+        }
+        eprintln!("shift {shift}: interior point in {interior} of 99 steps, held in {held}");
+        assert!(
+            interior <= 3,
+            "shift {shift}: interior point in {interior} steps"
+        );
+        // 89 and 94 here; 89 with the shift but not of the stored active set.
+        let least = if shift { 92 } else { 85 };
+        assert!(
+            held >= least,
+            "shift {shift}: the active set held in {held} steps"
+        );
+    }
+}

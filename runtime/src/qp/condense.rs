@@ -27,7 +27,9 @@
 //! states follow from the dynamics and the dynamics multipliers from the state
 //! stationarity conditions (there are no state bounds), backwards.
 
-use super::{Mat, OcpQp, QpMethod, QpSolver, Vect, condensing_pays, regularized_cholesky};
+use super::{
+    Mat, OcpQp, QpInfo, QpMethod, QpSolver, QpStatus, Vect, condensing_pays, regularized_cholesky,
+};
 use crate::kernels::{
     add_mul_sum, lower_inverse, mul, mul_sparse, mul_sparse_add_into, mul_sparse_into, mul_tr,
     sub_mul_tr_sum, symmetrize, tr_mul, tr_mul_add_into,
@@ -265,16 +267,13 @@ impl<
 
     /// Active-set polish ([`QpSettings::polish`](super::QpSettings::polish)): primal-dual
     /// active-set iterations (a semismooth Newton method for the bound-constrained QP) from
-    /// the interior point's controls and multipliers. With `mu = H u + g` (the bounds'
-    /// multipliers, `lam_l - lam_u`), an entry is fixed on its lower bound when the Newton
-    /// step along it, `u_i - mu_i / H_ii`, falls below the bound, on its upper bound when it
-    /// passes it, and free otherwise; the QP with the fixed entries as equalities is solved,
-    /// and the sets are updated until they repeat. Returns whether the result, checked
-    /// against every bound and the multipliers' signs, replaced the controls in `sol.u`.
+    /// the interior point's controls and multipliers (see
+    /// [`active_set_iterations`](Self::active_set_iterations)). Returns whether the result,
+    /// checked against every bound and the multipliers' signs, replaced the controls in
+    /// `sol.u`; its active set is then the one a warm active set starts from.
     // Not inlined: its arrays stay out of the stack frame of a solve that does not polish.
     #[inline(never)]
     pub(super) fn condensed_polish(&mut self) -> bool {
-        let n = NC.min(N);
         let mut v = self.sol.u;
         // The interior point's multipliers to start with.
         let mut mu = [Vect::<T, NU>::zeros(); N];
@@ -282,7 +281,35 @@ impl<
             *m = r.dual();
         }
         let (mut lower, mut upper) = ([[false; NU]; N], [[false; NU]; N]);
-        let mut settled = false;
+        if self
+            .active_set_iterations(&mut v, &mut mu, &mut lower, &mut upper, false)
+            .is_err()
+        {
+            return false;
+        }
+        self.sol.u = v;
+        self.store_active_set(&lower, &upper);
+        true
+    }
+
+    /// Primal-dual active-set iterations from `v` with multipliers `mu = H v + g` (the
+    /// bounds' multipliers, `lam_l - lam_u`): an entry is fixed on its lower bound when the
+    /// Newton step along it, `v_i - mu_i / H_ii`, falls below the bound, on its upper bound
+    /// when it passes it, and free otherwise; the QP with the fixed entries as equalities is
+    /// solved, and the sets are updated until they repeat, at most `POLISH_ITERATIONS`
+    /// times. `settled`: `v` already solves the QP on the sets passed in. `Ok` with the
+    /// number of solves if the end point is optimal
+    /// ([`active_set_optimal`](Self::active_set_optimal)), else `Err` with it.
+    fn active_set_iterations(
+        &mut self,
+        v: &mut [Vect<T, NU>; N],
+        mu: &mut [Vect<T, NU>; N],
+        lower: &mut [[bool; NU]; N],
+        upper: &mut [[bool; NU]; N],
+        mut settled: bool,
+    ) -> Result<u32, u32> {
+        let n = NC.min(N);
+        let mut solves = 0;
         for _ in 0..POLISH_ITERATIONS {
             // The active sets of this iterate.
             let mut changed = false;
@@ -305,25 +332,44 @@ impl<
             if !changed && settled {
                 break;
             }
-            if !self.solve_on_active_set(&lower, &upper, &mut v) {
-                return false;
+            solves += 1;
+            if !self.solve_on_active_set(lower, upper, v) {
+                return Err(solves);
             }
             settled = true;
             for (i, m) in mu.iter_mut().enumerate().take(n) {
-                *m = self.hessian_row(i, &v) + self.gu0[i];
+                *m = self.hessian_row(i, v) + self.gu0[i];
             }
         }
-        // Accept if every bound holds and the fixed entries' multipliers have their signs.
+        if self.active_set_optimal(v, mu, lower, upper) {
+            Ok(solves)
+        } else {
+            Err(solves)
+        }
+    }
+
+    /// Whether `v`, with the entries in `lower` / `upper` on their bounds and multipliers
+    /// `mu = H v + g`, solves the condensed QP to the tolerances: every free entry within its
+    /// bounds, and the fixed entries' multipliers of their signs (an entry whose bounds
+    /// coincide takes either). Stationarity on the free entries is the solve's.
+    fn active_set_optimal(
+        &self,
+        v: &[Vect<T, NU>; N],
+        mu: &[Vect<T, NU>; N],
+        lower: &[[bool; NU]; N],
+        upper: &[[bool; NU]; N],
+    ) -> bool {
         let tol = self.settings.tol_ineq.max(self.settings.tol_stat);
-        for k in 0..n {
+        for k in 0..NC.min(N) {
             let r = &self.ru[k];
             for i in 0..NU {
                 let (x, m) = (v[k][i], mu[k][i]);
                 let scale = T::ONE.max(x.abs());
+                let pinned = r.has_lo[i] && r.has_hi[i] && r.hi[i] <= r.lo[i];
                 let ok = if lower[k][i] {
-                    m >= -tol * T::ONE.max(m.abs())
+                    pinned || m >= -tol * T::ONE.max(m.abs())
                 } else if upper[k][i] {
-                    m <= tol * T::ONE.max(m.abs())
+                    pinned || m <= tol * T::ONE.max(m.abs())
                 } else {
                     x.finite()
                         && (!r.has_lo[i] || x >= r.lo[i] - tol * scale)
@@ -334,8 +380,200 @@ impl<
                 }
             }
         }
-        self.sol.u = v;
         true
+    }
+
+    /// Keeps `lower` / `upper` as the active set a warm start begins from.
+    fn store_active_set(&mut self, lower: &[[bool; NU]; N], upper: &[[bool; NU]; N]) {
+        for (a, l) in self.act_lo.iter_mut().zip(lower) {
+            *a = *l;
+        }
+        for (a, u) in self.act_hi.iter_mut().zip(upper) {
+            *a = *u;
+        }
+        self.act_valid = true;
+    }
+
+    /// The stored active set, as the solve's arrays.
+    fn stored_active_set(&self) -> ([[bool; NU]; N], [[bool; NU]; N]) {
+        let (mut lower, mut upper) = ([[false; NU]; N], [[false; NU]; N]);
+        for (l, a) in lower.iter_mut().zip(&self.act_lo) {
+            *l = *a;
+        }
+        for (u, a) in upper.iter_mut().zip(&self.act_hi) {
+            *u = *a;
+        }
+        (lower, upper)
+    }
+
+    /// The active set of an interior-point solution, by the polish's rule (the Newton step
+    /// `u_i - mu_i / H_ii` along each entry crosses a bound), stored for a warm start.
+    pub(super) fn active_set_of_interior_point(&mut self) {
+        let (mut lower, mut upper) = ([[false; NU]; N], [[false; NU]; N]);
+        for k in 0..NC.min(N) {
+            let r = &self.ru[k];
+            let mu = r.dual();
+            for i in 0..NU {
+                let h = self.tri[k][k][(i, i)].max(T::EPSILON);
+                let step = self.sol.u[k][i] - mu[i] / h;
+                lower[k][i] = r.has_lo[i] && step < r.lo[i];
+                upper[k][i] = !lower[k][i] && r.has_hi[i] && step > r.hi[i];
+            }
+        }
+        self.store_active_set(&lower, &upper);
+    }
+
+    /// Moves the stored active set one stage forward (the last stage's is repeated), as a
+    /// real-time iteration that shifts its trajectory does.
+    pub fn shift_active_set(&mut self) {
+        for k in 1..NC {
+            self.act_lo[k - 1] = self.act_lo[k];
+            self.act_hi[k - 1] = self.act_hi[k];
+        }
+    }
+
+    /// The preparation of a warm active set: the stored set, less the bounds the QP no
+    /// longer has, kept and factorized. Returns whether the factorization succeeded.
+    pub(super) fn prepare_active_set(&mut self) -> bool {
+        let (mut lower, mut upper) = self.stored_active_set();
+        for k in 0..NC.min(N) {
+            let r = &self.ru[k];
+            for i in 0..NU {
+                lower[k][i] &= r.has_lo[i];
+                upper[k][i] &= !lower[k][i] && r.has_hi[i];
+            }
+        }
+        self.store_active_set(&lower, &upper);
+        self.factorize_on_active_set(&lower, &upper)
+    }
+
+    /// The solve from the warm active set that [`prepare_active_set`] factorized: the QP on
+    /// that set by substitution (`1 + settings.refine` Newton steps), kept if optimal, else
+    /// primal-dual active-set iterations from it. `Ok` with the solve's outcome, or `Err`
+    /// with the active-set solves spent when the interior point must solve the QP (also for a
+    /// non-finite `x0`, which it reports).
+    ///
+    /// [`prepare_active_set`]: Self::prepare_active_set
+    #[inline(never)]
+    pub(super) fn solve_on_warm_active_set<const NH: usize>(
+        &mut self,
+        qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>,
+    ) -> Result<QpInfo<T>, u32> {
+        if !qp.x0.iter().all(|v| v.finite()) {
+            return Err(0);
+        }
+        let n = NC.min(N);
+        self.condensed_gradient(qp);
+        let (mut lower, mut upper) = self.stored_active_set();
+        let mut v = [Vect::<T, NU>::zeros(); N];
+        for k in 0..n {
+            let r = &self.ru[k];
+            for i in 0..NU {
+                if lower[k][i] {
+                    v[k][i] = r.lo[i];
+                } else if upper[k][i] {
+                    v[k][i] = r.hi[i];
+                }
+            }
+        }
+        if !self.newton_on_active_set(&lower, &upper, &mut v, 1 + self.settings.refine) {
+            return Err(1);
+        }
+        let mut mu = [Vect::<T, NU>::zeros(); N];
+        self.active_set_multipliers(&v, &mut mu);
+        let mut solves = 1;
+        if !self.active_set_optimal(&v, &mu, &lower, &upper) {
+            solves += self
+                .active_set_iterations(&mut v, &mut mu, &mut lower, &mut upper, true)
+                .map_err(|n| n + 1)?;
+        }
+        // The residuals to the tolerances: one more refinement step where rounding left them
+        // above (ill-conditioned QPs at tight tolerances), else the interior point.
+        let (mut stat, mut ineq) = self.active_set_residuals(&v, &mu, &lower, &upper);
+        let (tol_stat, tol_ineq) = (self.settings.tol_stat, self.settings.tol_ineq);
+        if stat > tol_stat || ineq > tol_ineq {
+            if !self.newton_on_active_set(&lower, &upper, &mut v, 1) {
+                return Err(solves);
+            }
+            self.active_set_multipliers(&v, &mut mu);
+            (stat, ineq) = self.active_set_residuals(&v, &mu, &lower, &upper);
+            if stat > tol_stat
+                || ineq > tol_ineq
+                || !self.active_set_optimal(&v, &mu, &lower, &upper)
+            {
+                return Err(solves);
+            }
+        }
+        // The exact solution: its slacks and multipliers for the next solve's warm start.
+        for k in 0..n {
+            self.ru[k].hold(&v[k], &mu[k], &lower[k], &upper[k]);
+        }
+        self.sol.u = v;
+        self.hu = mu;
+        self.store_active_set(&lower, &upper);
+        self.dual_valid = true;
+        self.polished = false;
+        self.on_active_set = true;
+        self.expand(qp);
+        Ok(QpInfo {
+            status: QpStatus::Solved,
+            iterations: 0,
+            active_set_solves: solves,
+            res_stat: stat,
+            res_eq: T::ZERO,
+            res_ineq: ineq,
+            mu: T::ZERO,
+        })
+    }
+
+    /// `mu = H v + g`.
+    fn active_set_multipliers(&self, v: &[Vect<T, NU>; N], mu: &mut [Vect<T, NU>; N]) {
+        for (i, m) in mu.iter_mut().enumerate().take(NC.min(N)) {
+            *m = self.hessian_row(i, v) + self.gu0[i];
+        }
+    }
+
+    /// The stationarity residual of `v` on the sets (`mu` on the free entries, relative to
+    /// the largest of `H v`, `g` and the fixed entries' multipliers when that exceeds 1, as
+    /// the interior point's) and its inequality residual (the free entries' bound
+    /// violations).
+    fn active_set_residuals(
+        &self,
+        v: &[Vect<T, NU>; N],
+        mu: &[Vect<T, NU>; N],
+        lower: &[[bool; NU]; N],
+        upper: &[[bool; NU]; N],
+    ) -> (T, T) {
+        let (mut stat, mut ineq, mut scale) = (T::ZERO, T::ZERO, T::ONE);
+        for k in 0..NC.min(N) {
+            let r = &self.ru[k];
+            for i in 0..NU {
+                let (x, m, g) = (v[k][i], mu[k][i], self.gu0[k][i]);
+                scale = scale.max((m - g).abs()).max(g.abs());
+                if lower[k][i] || upper[k][i] {
+                    scale = scale.max(m.abs());
+                } else {
+                    stat = stat.max(m.abs());
+                    if r.has_lo[i] {
+                        ineq = ineq.max(r.lo[i] - x);
+                    }
+                    if r.has_hi[i] {
+                        ineq = ineq.max(x - r.hi[i]);
+                    }
+                }
+            }
+        }
+        (stat / scale, ineq)
+    }
+
+    /// Whether the last solution, from an active set, is optimal to the current settings'
+    /// tolerances (its multipliers are in `hu`).
+    pub(super) fn active_set_solution_optimal(&self) -> bool {
+        let (lower, upper) = self.stored_active_set();
+        let (stat, ineq) = self.active_set_residuals(&self.sol.u, &self.hu, &lower, &upper);
+        stat <= self.settings.tol_stat
+            && ineq <= self.settings.tol_ineq
+            && self.active_set_optimal(&self.sol.u, &self.hu, &lower, &upper)
     }
 
     /// Solves `H v + g = 0` on the free entries with the fixed ones (`lower`, `upper`, already
@@ -347,6 +585,16 @@ impl<
         lower: &[[bool; NU]; N],
         upper: &[[bool; NU]; N],
         v: &mut [Vect<T, NU>; N],
+    ) -> bool {
+        self.factorize_on_active_set(lower, upper) && self.newton_on_active_set(lower, upper, v, 2)
+    }
+
+    /// The block Cholesky factorization of `H` with the rows and columns of the fixed entries
+    /// (`lower`, `upper`) replaced by the identity.
+    fn factorize_on_active_set(
+        &mut self,
+        lower: &[[bool; NU]; N],
+        upper: &[[bool; NU]; N],
     ) -> bool {
         let n = NC.min(N);
         let fixed = |k: usize, i: usize| lower[k][i] || upper[k][i];
@@ -367,10 +615,23 @@ impl<
                 }
             }
         }
-        if !self.block_cholesky(true) {
-            return false;
-        }
-        for _ in 0..2 {
+        self.block_cholesky(true)
+    }
+
+    /// `steps` Newton steps `v <- v - F^-1 r` on the free entries with the factor `F` of
+    /// [`factorize_on_active_set`](Self::factorize_on_active_set) (`r = H v + g` on the free
+    /// entries, zero on the fixed ones; from the second on, iterative refinement). Returns
+    /// whether `v` is finite.
+    fn newton_on_active_set(
+        &self,
+        lower: &[[bool; NU]; N],
+        upper: &[[bool; NU]; N],
+        v: &mut [Vect<T, NU>; N],
+        steps: u32,
+    ) -> bool {
+        let n = NC.min(N);
+        let fixed = |k: usize, i: usize| lower[k][i] || upper[k][i];
+        for _ in 0..steps {
             let mut r = [Vect::<T, NU>::zeros(); N];
             for (i, ri) in r.iter_mut().enumerate().take(n) {
                 let g = self.hessian_row(i, v) + self.gu0[i];
