@@ -876,8 +876,11 @@ impl<
     /// The part of a solve that does not depend on `x0`: condenses `qp` when
     /// [`QpMethod`] says so, then builds the interior point's starting point and factorizes
     /// its first Newton system (neither depends on `x0` unless stage 0 has general rows with
-    /// a bound; then that is left to the solve). A real-time iteration calls it in its
-    /// preparation phase, before the state is measured.
+    /// a bound; then that is left to the solve). With [`QpSettings::warm_active_set`] and a
+    /// stored active set, a condensed QP's Hessian is factorized on that set instead, and
+    /// the interior point's start is left to the solve, which needs it only where the set
+    /// misses. A real-time iteration calls it in its preparation phase, before the state is
+    /// measured.
     ///
     /// The QP's data are checked and its bounds loaded here too, so that
     /// [`solve_prepared`](Self::solve_prepared) checks only `x0`; data that fail the check
