@@ -448,7 +448,7 @@ pub(crate) fn run(args: &BenchArgs) -> ExitCode {
             .sum::<f64>()
             .sqrt()
     });
-    let iters: Vec<f64> = run.qp_iterations.iter().map(|&i| f64::from(i)).collect();
+    let mean = |v: &[u32]| v.iter().map(|&i| f64::from(i)).sum::<f64>() / v.len().max(1) as f64;
     let report = Report {
         model: args.model.clone(),
         solver: solver.to_string(),
@@ -460,21 +460,11 @@ pub(crate) fn run(args: &BenchArgs) -> ExitCode {
         prepare_us: Stats::of(&prep),
         feedback_us: Stats::of(&feed),
         total_us: Stats::of(&total),
-        qp_iterations_mean: iters.iter().sum::<f64>() / iters.len().max(1) as f64,
+        qp_iterations_mean: mean(&run.qp_iterations),
         qp_iterations_max: run.qp_iterations.iter().copied().max().unwrap_or(0),
         qp_interior_point_steps: run.qp_iterations.iter().filter(|&&i| i > 0).count(),
-        qp_active_set_solves_mean: run
-            .active_set_solves
-            .iter()
-            .map(|&i| f64::from(i))
-            .sum::<f64>()
-            / run.active_set_solves.len().max(1) as f64,
-        sqp_iterations_mean: run
-            .sqp_iterations
-            .iter()
-            .map(|&i| f64::from(i))
-            .sum::<f64>()
-            / run.sqp_iterations.len().max(1) as f64,
+        qp_active_set_solves_mean: mean(&run.active_set_solves),
+        sqp_iterations_mean: mean(&run.sqp_iterations),
         sqp_limit_steps: run.sqp_limit_steps,
         final_position_error_m: err,
         all_ok: run.all_ok,

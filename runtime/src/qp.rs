@@ -940,7 +940,7 @@ impl<
                 self.polished = self.condensed_polish();
             }
             if info.status == QpStatus::Solved {
-                if !self.polished {
+                if !self.polished && self.settings.warm_active_set {
                     self.active_set_of_interior_point();
                 }
             } else {

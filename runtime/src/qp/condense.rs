@@ -316,10 +316,7 @@ impl<
             for k in 0..n {
                 let r = &self.ru[k];
                 for i in 0..NU {
-                    let h = self.tri[k][k][(i, i)].max(T::EPSILON);
-                    let step = v[k][i] - mu[k][i] / h;
-                    let lo = r.has_lo[i] && step < r.lo[i];
-                    let hi = !lo && r.has_hi[i] && step > r.hi[i];
+                    let (lo, hi) = self.crossed_bounds(k, i, v[k][i], mu[k][i]);
                     changed |= lo != lower[k][i] || hi != upper[k][i];
                     (lower[k][i], upper[k][i]) = (lo, hi);
                     if lo {
@@ -411,16 +408,23 @@ impl<
     pub(super) fn active_set_of_interior_point(&mut self) {
         let (mut lower, mut upper) = ([[false; NU]; N], [[false; NU]; N]);
         for k in 0..NC.min(N) {
-            let r = &self.ru[k];
-            let mu = r.dual();
+            let mu = self.ru[k].dual();
             for i in 0..NU {
-                let h = self.tri[k][k][(i, i)].max(T::EPSILON);
-                let step = self.sol.u[k][i] - mu[i] / h;
-                lower[k][i] = r.has_lo[i] && step < r.lo[i];
-                upper[k][i] = !lower[k][i] && r.has_hi[i] && step > r.hi[i];
+                (lower[k][i], upper[k][i]) = self.crossed_bounds(k, i, self.sol.u[k][i], mu[i]);
             }
         }
         self.store_active_set(&lower, &upper);
+    }
+
+    /// Whether the Newton step along entry `i` of stage `k` from `v` with multiplier `mu`,
+    /// `v - mu / H_ii`, falls below its lower bound or (else) passes its upper bound: the
+    /// active-set rule of the polish and the warm active set.
+    fn crossed_bounds(&self, k: usize, i: usize, v: T, mu: T) -> (bool, bool) {
+        let r = &self.ru[k];
+        let h = self.tri[k][k][(i, i)].max(T::EPSILON);
+        let step = v - mu / h;
+        let lo = r.has_lo[i] && step < r.lo[i];
+        (lo, !lo && r.has_hi[i] && step > r.hi[i])
     }
 
     /// Moves the stored active set one stage forward (the last stage's is repeated), as a
@@ -598,13 +602,21 @@ impl<
     ) -> bool {
         let n = NC.min(N);
         let fixed = |k: usize, i: usize| lower[k][i] || upper[k][i];
+        let mut any = [false; N];
+        for (a, (l, u)) in any.iter_mut().zip(lower.iter().zip(upper)) {
+            *a = l.iter().chain(u).any(|&b| b);
+        }
         for i in 0..n {
             for j in 0..=i {
                 let mut m = self.tri[j][i];
-                for p in 0..NU {
-                    for q in 0..NU {
-                        if fixed(i, p) || fixed(j, q) {
-                            m[(p, q)] = if i == j && p == q { T::ONE } else { T::ZERO };
+                // A block of two stages without a fixed entry is copied as it is (the common
+                // case: no bound active).
+                if any[i] || any[j] {
+                    for p in 0..NU {
+                        for q in 0..NU {
+                            if fixed(i, p) || fixed(j, q) {
+                                m[(p, q)] = if i == j && p == q { T::ONE } else { T::ZERO };
+                            }
                         }
                     }
                 }
