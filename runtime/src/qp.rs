@@ -327,7 +327,8 @@ pub struct QpSettings<T> {
     /// end on their values; the residuals reported stay the interior point's. With the
     /// Riccati recursion, a solve stopped by the iteration limit is polished too, and if
     /// the polish is kept the status is `Solved` with the polish's residuals
-    /// (complementarity zero). QPs with soft rows are not polished, nor are QPs solved by
+    /// (complementarity zero); so is one whose Newton system broke down after its first
+    /// iteration ([`QpStatus::NumericalError`]), even with this setting off. QPs with soft rows are not polished, nor are QPs solved by
     /// the Riccati recursion in a solver with condensing storage (`NC = N`). Default:
     /// [`Real::DEFAULT_POLISH`].
     pub polish: bool,
@@ -443,7 +444,9 @@ pub enum QpStatus {
     /// The input contains NaN or infinite data (other than absent bounds), or a negative
     /// soft-constraint penalty.
     NonFiniteInput = 3,
-    /// The Newton system could not be factorized even with increased regularization.
+    /// The Newton system could not be factorized even with increased regularization (and,
+    /// with the Riccati recursion after the first iteration, the polish did not solve the
+    /// QP on the interior point's active set; see [`QpSettings::polish`]).
     NumericalError = 4,
     /// A stage bounds more states than the solver has state-bound rows (`NBX` of
     /// [`QpSolver`]).
@@ -954,14 +957,19 @@ impl<
         // Cortex-M4F, which has 1 KB to spare under its 64 KiB target) out of their builds.
         // An interior point stopped by the iteration limit is polished too: a polish that
         // is kept meets the tolerances with exact complementarity, so the QP is solved.
+        // So is one whose Newton system broke down after some iterations, whatever the
+        // polish setting: at tight tolerances the barrier weights of active rows reach
+        // 1e15 and more, and rounding in the Riccati recursion (`P = ... - W'W`) can leave
+        // `R + B'PB` indefinite, while the active set is long settled. The polish solves
+        // the QP on that set without barrier weights.
         let limit = info.status == QpStatus::MaxIterations;
+        let broke = info.status == QpStatus::NumericalError && info.iterations > 0;
         if NC == 0
-            && self.settings.polish
-            && (polish || limit)
+            && ((self.settings.polish && (polish || limit)) || broke)
             && let Some([res_stat, res_eq, res_ineq]) = self.riccati_polish(qp)
         {
             self.polished = true;
-            if limit {
+            if limit || broke {
                 return QpInfo {
                     status: QpStatus::Solved,
                     res_stat,
