@@ -146,8 +146,8 @@ struct BenchArgs {
     #[arg(long, value_name = "loose|tight")]
     sqp_qps: Option<String>,
     /// How each QP starts: on (the default) from the last QP's active set, factorized in the
-    /// preparation phase (condensed QPs; the interior point only where that set and the
-    /// active-set iterations after it miss); off: every QP by the interior point.
+    /// preparation phase (the interior point only where that set and the active-set
+    /// iterations after it miss); off: every QP by the interior point.
     /// `QpSettings::warm_active_set`.
     #[arg(long, value_name = "on|off")]
     warm_active_set: Option<String>,

@@ -43,9 +43,10 @@ use crate::real::Real;
 use crate::rows::{BoundError, Rhs, Rows, Soft, SubRows};
 
 mod condense;
+mod held;
 mod polish;
 
-use polish::{ActiveSet, weights};
+use polish::{ActiveSet, Side, Weight, weights};
 
 type Mat<T, const R: usize, const C: usize> = SMatrix<T, R, C>;
 type Vect<T, const R: usize> = SVector<T, R>;
@@ -328,23 +329,27 @@ pub struct QpSettings<T> {
     /// Riccati recursion, a solve stopped by the iteration limit is polished too, and if
     /// the polish is kept the status is `Solved` with the polish's residuals
     /// (complementarity zero); so is one whose Newton system broke down after its first
-    /// iteration ([`QpStatus::NumericalError`]), even with this setting off. QPs with soft rows are not polished, nor are QPs solved by
-    /// the Riccati recursion in a solver with condensing storage (`NC = N`). Default:
-    /// [`Real::DEFAULT_POLISH`].
+    /// iteration ([`QpStatus::NumericalError`]), even with this setting off. QPs with soft
+    /// rows are not polished, nor are QPs solved by the Riccati recursion in a solver with
+    /// condensing storage (`NC = N`). Default: [`Real::DEFAULT_POLISH`].
     pub polish: bool,
-    /// Condensed QPs: start from the last solve's active set (which control bounds held).
-    /// [`QpSolver::prepare`] factorizes the condensed Hessian with those entries held on
-    /// their bounds, which does not depend on `x0`; [`QpSolver::solve_prepared`] then solves
-    /// the QP on that set by substitution and keeps the result if it is the QP's solution
-    /// (every bound holds and the held entries' multipliers have their signs, to the
-    /// tolerances). Otherwise primal-dual active-set iterations start from it (at most 4,
-    /// one factorization each, as in the polish), and if they do not end on the solution
-    /// either, the interior point solves the QP. A real-time iteration's QPs change little
-    /// from one control step to the next, so the set usually holds and the feedback is a
-    /// few products. The solution is exact where the set holds; [`QpInfo::iterations`] is
-    /// then 0 and [`QpInfo::active_set_solves`] counts the solves. No effect on QPs solved
-    /// by the Riccati recursion. Default: off ([`RtiSettings::DEFAULT`](crate::RtiSettings)
-    /// turns it on).
+    /// Start from the last solve's active set (which control bounds held).
+    /// [`QpSolver::prepare`] factorizes the QP with those entries held on their bounds,
+    /// which does not depend on `x0`: the condensed Hessian, or the Riccati recursion with
+    /// the held controls eliminated and no barrier weights. [`QpSolver::solve_prepared`]
+    /// then solves the QP on that set by substitution (for the Riccati recursion, one
+    /// backward and one forward vector pass per step) and keeps the result if it is the
+    /// QP's solution (every bound and row holds and the held entries' multipliers have
+    /// their signs, to the tolerances). Otherwise primal-dual active-set iterations start
+    /// from it (at most 4, one factorization each), and if they do not end on the
+    /// solution either, the interior point solves the QP. A real-time iteration's QPs
+    /// change little from one control step to the next, so the set usually holds and the
+    /// feedback is a few products. The solution is exact where the set holds;
+    /// [`QpInfo::iterations`] is then 0 and [`QpInfo::active_set_solves`] counts the
+    /// solves. With the Riccati recursion the set is taken only from solutions with no
+    /// active row other than a control bound, and QPs with soft rows are left to the
+    /// interior point. Default: off ([`RtiSettings::DEFAULT`](crate::RtiSettings) turns it
+    /// on).
     pub warm_active_set: bool,
 }
 
@@ -579,16 +584,17 @@ pub struct QpSolver<
     /// Newton system, with the settings `prefactor_settings`; the next solve uses it.
     prefactored: bool,
     prefactor_settings: QpSettings<T>,
-    /// The control bounds held in the last condensed solution (lower, upper), valid when
-    /// `act_valid` ([`QpSettings::warm_active_set`]).
-    act_lo: [[bool; NU]; NC],
-    act_hi: [[bool; NU]; NC],
+    /// The control bounds held in the last solution (lower, upper), valid when `act_valid`
+    /// ([`QpSettings::warm_active_set`]).
+    act_lo: [[bool; NU]; N],
+    act_hi: [[bool; NU]; N],
     act_valid: bool,
-    /// The last [`prepare`](Self::prepare) factorized the condensed Hessian on the stored
-    /// active set (with the settings `prefactor_settings`); the next solve starts there.
+    /// The last [`prepare`](Self::prepare) factorized the condensed Hessian, or the Riccati
+    /// recursion, on the stored active set (with the settings `prefactor_settings`); the
+    /// next solve starts there.
     guessed: bool,
-    /// The last solution came from an active set and is exact (its multipliers `H u + g`
-    /// are in `hu`).
+    /// The last solution came from an active set and is exact (a condensed QP's multipliers
+    /// `H u + g` are in `hu`; the Riccati recursion's rows hold its slacks and multipliers).
     on_active_set: bool,
     /// Condensed Hessian and the Cholesky factor of `H + Sigma`, sharing one array of blocks:
     /// `H_ij` (`i >= j`) at `[j][i]`, on and above the diagonal, and the factor's `L_ij`
@@ -614,6 +620,48 @@ impl<
 {
     fn default() -> Self {
         Self::NEW
+    }
+}
+
+/// Which Newton system a Riccati factorization is of.
+#[derive(Clone, Copy)]
+enum Newton<
+    'a,
+    T: Real,
+    const NBX: usize,
+    const NU: usize,
+    const NG: usize,
+    const NGN: usize,
+    const N: usize,
+> {
+    /// The interior point's: each row with its barrier weight.
+    Interior,
+    /// The polish's: the rows of its active set with its penalty weight, the others none.
+    Polish(&'a ActiveSet<T, NBX, NU, NG, NGN, N>),
+    /// The warm active set's: no row weighted, and the held controls (`true`) eliminated.
+    Held(&'a [[bool; NU]; N]),
+}
+
+impl<
+    'a,
+    T: Real,
+    const NBX: usize,
+    const NU: usize,
+    const NG: usize,
+    const NGN: usize,
+    const N: usize,
+> Newton<'a, T, NBX, NU, NG, NGN, N>
+{
+    /// The weights of the row set that `sides` picks from the polish's active set.
+    fn weight<const K: usize>(
+        self,
+        sides: impl FnOnce(&'a ActiveSet<T, NBX, NU, NG, NGN, N>) -> &'a [Side; K],
+    ) -> Weight<'a, T, K> {
+        match self {
+            Newton::Interior => Weight::Barrier,
+            Newton::Polish(a) => Weight::Active(sides(a), a.w),
+            Newton::Held(_) => Weight::Zero,
+        }
     }
 }
 
@@ -731,8 +779,8 @@ impl<
         polished: false,
         prefactored: false,
         prefactor_settings: QpSettings::ZERO,
-        act_lo: [[false; NU]; NC],
-        act_hi: [[false; NU]; NC],
+        act_lo: [[false; NU]; N],
+        act_hi: [[false; NU]; N],
         act_valid: false,
         guessed: false,
         on_active_set: false,
@@ -895,10 +943,16 @@ impl<
             && self.check_stages(qp)
             && self.load_bounds(qp).is_ok()
             && self.condense(qp);
+        let ready =
+            self.condensed || (NR == N && self.check_stages(qp) && self.load_bounds(qp).is_ok());
         // The last solve's active set, factorized: the solve starts there (and the interior
         // point, if it is needed, from scratch).
-        if self.condensed && self.settings.warm_active_set && self.act_valid {
-            self.guessed = self.prepare_active_set();
+        if ready && self.settings.warm_active_set && self.act_valid {
+            self.guessed = if self.condensed {
+                self.prepare_active_set()
+            } else {
+                self.prepare_held(qp)
+            };
             self.prefactor_settings = self.settings;
             if self.guessed {
                 return;
@@ -906,11 +960,9 @@ impl<
         }
         // The interior point's starting point and its first Newton system depend on `x0`
         // only through stage 0's general rows: without them both are built here.
-        let ready =
-            self.condensed || (NR == N && self.check_stages(qp) && self.load_bounds(qp).is_ok());
         if ready && self.rg.first().is_none_or(|r| r.count() == 0) {
             self.start(qp);
-            self.prefactored = self.factorize(qp, None);
+            self.prefactored = self.factorize(qp, Newton::Interior);
             self.prefactor_settings = self.settings;
         }
     }
@@ -926,11 +978,15 @@ impl<
     ) -> QpInfo<T> {
         self.on_active_set = false;
         let guessed = core::mem::replace(&mut self.guessed, false)
-            && self.condensed
             && self.prefactor_settings == self.settings;
         let mut solves = 0;
         if guessed {
-            match self.solve_on_warm_active_set(qp) {
+            let warm = if self.condensed {
+                self.solve_on_warm_active_set(qp)
+            } else {
+                self.solve_held(qp)
+            };
+            match warm {
                 Ok(info) => return info,
                 Err(n) => solves = n,
             }
@@ -962,6 +1018,13 @@ impl<
         // 1e15 and more, and rounding in the Riccati recursion (`P = ... - W'W`) can leave
         // `R + B'PB` indefinite, while the active set is long settled. The polish solves
         // the QP on that set without barrier weights.
+        if self.settings.warm_active_set {
+            if info.status == QpStatus::Solved {
+                self.held_set_of_interior_point();
+            } else {
+                self.act_valid = false;
+            }
+        }
         let limit = info.status == QpStatus::MaxIterations;
         let broke = info.status == QpStatus::NumericalError && info.iterations > 0;
         if NC == 0
@@ -995,9 +1058,15 @@ impl<
         self.polished = false;
         // A solution from the warm active set is exact: it only needs checking against
         // these settings' tolerances.
-        if self.condensed && self.on_active_set && self.active_set_solution_optimal() {
-            self.polished = true;
-            return true;
+        if self.on_active_set {
+            self.polished = if self.condensed {
+                self.active_set_solution_optimal()
+            } else {
+                self.held_solution_optimal(qp)
+            };
+            if self.polished {
+                return true;
+            }
         }
         if self.condensed {
             self.polished = self.condensed_polish();
@@ -1165,7 +1234,7 @@ impl<
                 return self.info(QpStatus::Infeasible, iter, self.exact(qp, res));
             }
             // The first Newton system does not depend on `x0`: `prepare` may have factorized it.
-            let factorized = (pre && iter == 0) || self.factorize(qp, None);
+            let factorized = (pre && iter == 0) || self.factorize(qp, Newton::Interior);
             if !factorized {
                 return self.info(QpStatus::NumericalError, iter, self.exact(qp, res));
             }
@@ -1362,7 +1431,7 @@ impl<
     fn factorize<const NH: usize>(
         &mut self,
         qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>,
-        active: Option<&ActiveSet<T, NBX, NU, NG, NGN, N>>,
+        mode: Newton<'_, T, NBX, NU, NG, NGN, N>,
     ) -> bool {
         if N == 0 {
             return true;
@@ -1380,10 +1449,10 @@ impl<
             last,
             &self
                 .rxn
-                .scatter(&weights(&self.rxn, None, active.map(|a| (&a.xn, a.w)))),
+                .scatter(&weights(&self.rxn, None, mode.weight(|a| &a.xn))),
         );
         if NGN > 0 {
-            let sg = weights(&self.rgn, Some(&self.sgn), active.map(|a| (&a.gn, a.w)));
+            let sg = weights(&self.rgn, Some(&self.sgn), mode.weight(|a| &a.gn));
             mul_sparse_add_into(last, &scaled_transpose(&sg, &t.c), &t.c);
         }
         symmetrize(last);
@@ -1401,18 +1470,14 @@ impl<
             let mut rbar = h.r;
             add_diagonal(
                 &mut rbar,
-                &weights(&self.ru[k], None, active.map(|a| (&a.u[k], a.w))),
+                &weights(&self.ru[k], None, mode.weight(|a| &a.u[k])),
             );
             mul_sparse_add_into(&mut rbar, &pb.transpose(), &s.b);
             // S~' = S' + C' Sigma_g D + A'PB, transposed, so that every product with it
             // runs down its columns.
             let mut sbt = h.s.transpose();
             let cts = if NG > 0 {
-                let w = weights(
-                    &self.rg[k],
-                    Some(&self.sg[k]),
-                    active.map(|a| (&a.g[k], a.w)),
-                );
+                let w = weights(&self.rg[k], Some(&self.sg[k]), mode.weight(|a| &a.g[k]));
                 mul_sparse_add_into(&mut rbar, &scaled_transpose(&w, &s.d), &s.d);
                 let cts = scaled_transpose(&w, &s.c);
                 mul_sparse_add_into(&mut sbt, &cts, &s.d);
@@ -1429,6 +1494,18 @@ impl<
                 sbt += mul_sparse(&pb.transpose(), &s.a).transpose();
                 None
             };
+            // Held controls drop out: their rows and columns of R~ become the identity and
+            // their rows of S~ zero, so P_k is the recursion's over the free controls.
+            if let Newton::Held(held) = mode
+                && let Some(held) = held.get(k)
+            {
+                for (i, _) in held.iter().enumerate().filter(|(_, h)| **h) {
+                    rbar.row_mut(i).fill(T::ZERO);
+                    rbar.column_mut(i).fill(T::ZERO);
+                    rbar[(i, i)] = T::ONE;
+                    sbt.column_mut(i).fill(T::ZERO);
+                }
+            }
             let Some(chol) = regularized_cholesky(rbar, self.settings.reg) else {
                 return false;
             };
@@ -1446,11 +1523,7 @@ impl<
                 *pk = h.q;
                 add_diagonal(
                     pk,
-                    &self.rx[k].scatter(&weights(
-                        &self.rx[k],
-                        None,
-                        active.map(|a| (&a.x[k], a.w)),
-                    )),
+                    &self.rx[k].scatter(&weights(&self.rx[k], None, mode.weight(|a| &a.x[k]))),
                 );
                 if let Some(cts) = cts {
                     mul_sparse_add_into(pk, &cts, &s.c);
@@ -1492,7 +1565,7 @@ impl<
         self.gx0 = self.gxt;
         self.gu0 = self.gut;
         self.gn0 = self.gnt;
-        self.lq_solve(qp);
+        self.lq_solve(qp, None);
         for _ in 0..self.settings.refine {
             self.refine(qp);
         }
@@ -1511,16 +1584,26 @@ impl<
     /// Riccati solve of the linear-quadratic problem with gradients `gxt`, `gut`, `gnt`, and
     /// dynamics residuals `rbt`, using the factorization of the last [`factorize`] call;
     /// writes `dx`, `du`, `dxn` and `pi_new`.
-    fn lq_solve<const NH: usize>(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>) {
+    fn lq_solve<const NH: usize>(
+        &mut self,
+        qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>,
+        held: Option<&[[bool; NU]; N]>,
+    ) {
         // With R~ = L L' and W' = S~'L^-T (`factorize`), the feedforward control
         // -R~^-1 (g~ + B'(P rb + p)) is -L^-T y for y = L^-1 (g~ + B'(P rb + p)), kept in `kv`,
-        // and the control is du = K dx - L^-T y = -L^-T (W dx + y).
+        // and the control is du = K dx - L^-T y = -L^-T (W dx + y). A held control's `y` is
+        // zero: with its rows of L and W those of the identity and zero, its `du` is zero.
         let mut pv = self.gnt;
         for k in (0..N).rev() {
             let s = &qp.stages[k];
             self.pvn[k] = pv;
             let pb = mul(&self.pn[k], &self.rbt[k]) + pv;
-            let y = mul(&self.linv[k], &(self.gut[k] + tr_mul(&s.b, &pb)));
+            let mut y = mul(&self.linv[k], &(self.gut[k] + tr_mul(&s.b, &pb)));
+            if let Some(held) = held.and_then(|h| h.get(k)) {
+                for (yi, _) in y.iter_mut().zip(held).filter(|(_, h)| **h) {
+                    *yi = T::ZERO;
+                }
+            }
             self.kv[k] = y;
             if k > 0 {
                 pv = self.gxt[k] + tr_mul(&s.a, &pb) - mul(&self.wt[k], &y);
@@ -1576,7 +1659,7 @@ impl<
         self.gnt =
             t.q * dxn0 + self.rxn.sigma().component_mul(&dxn0) + tr_mul(&t.c, &wgn) + self.gn0
                 - pi0[N - 1];
-        self.lq_solve(qp);
+        self.lq_solve(qp, None);
         for k in 0..N {
             self.dx[k] += dx0[k];
             self.du[k] += du0[k];

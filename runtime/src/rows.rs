@@ -218,6 +218,11 @@ impl<T: Real, const K: usize> Rows<T, K> {
         }
     }
 
+    /// [`hold`](Self::hold) with no side held: slacks from the values `v`, multipliers zero.
+    pub fn hold_free(&mut self, v: &SVector<T, K>) {
+        self.hold(v, &SVector::zeros(), &[false; K], &[false; K]);
+    }
+
     /// Every side absent: slacks 1, multipliers, residuals and directions 0 (nothing to do
     /// if no side has been started since the last clear, or ever).
     fn clear(&mut self) {
@@ -688,6 +693,12 @@ impl<T: Real, const NV: usize, const K: usize> SubRows<T, NV, K> {
     pub fn warm_init(&mut self, v: &SVector<T, NV>, t_floor: T, lam_floor: T) {
         let s = self.gather(v);
         self.rows.warm_init(&s, t_floor, lam_floor);
+    }
+
+    /// [`Rows::hold_free`] for entry values `v`.
+    pub fn hold_free(&mut self, v: &SVector<T, NV>) {
+        let s = self.gather(v);
+        self.rows.hold_free(&s);
     }
 
     /// [`Rows::residuals`] for entry values `v`.

@@ -1266,28 +1266,50 @@ struct WarmSetCounts {
     judged: usize,
     /// Solved on the last solve's active set, no other solve.
     held: usize,
-    /// Solved by active-set iterations after the warm set.
+    /// Solved by active-set iterations (condensed) or one more Newton step (Riccati) after
+    /// the warm set.
     iterated: usize,
     /// Solved by the interior point after the active-set solves.
     interior: usize,
+    /// Solved with no warm set to start from (the Riccati recursion's, when the last
+    /// solution had an active row other than a control bound).
+    cold: usize,
+    /// Follow-ups clarabel found infeasible (not judged).
+    infeasible: usize,
     /// Largest difference from clarabel (relative, as [`compare`]).
     worst: f64,
 }
 
-/// Sequences of related control-bounded QPs as a real-time iteration meets them: each draw's
-/// QP, then 6 more with `x0` and the gradients moved by random amounts of size `step`. A
-/// condensing solver with the warm active set solves them in turn; every follow-up must be
-/// solved within the tolerances and, where judged, match clarabel to 1e-7 (relative), and
-/// its result must match the interior point's from scratch. Counts how each was solved.
-fn warm_active_set_sequence<const NX: usize, const NU: usize, const N: usize>(
+impl WarmSetCounts {
+    fn warm(&self) -> usize {
+        self.held + self.iterated + self.interior
+    }
+}
+
+/// Sequences of related QPs as a real-time iteration meets them: each draw's QP (`draw`),
+/// then 6 more with `x0` and the gradients moved by random amounts of size `step`. A
+/// solver (`NC = N`: condensing storage) with the warm active set and `method` solves them
+/// in turn; every follow-up must be solved within the tolerances and, where judged, match
+/// clarabel to 1e-7 (relative), and its result must match the interior point's from
+/// scratch, polished (by a solver without condensing storage where the QP is not
+/// condensed, as only that one polishes it). Counts how each was solved.
+fn warm_active_set_sequence<
+    const NX: usize,
+    const NU: usize,
+    const NG: usize,
+    const NGN: usize,
+    const N: usize,
+>(
     seeds: core::ops::Range<u64>,
     step: f64,
+    method: QpMethod,
+    draw: fn(u64) -> OcpQp<f64, NX, NU, NG, NGN, N>,
 ) -> WarmSetCounts {
     let mut counts = WarmSetCounts::default();
     for seed in seeds {
-        let base = control_bounded_qp::<NX, NU, N>(seed);
-        let mut solver = Box::new(QpSolver::<f64, NX, NU, 0, 0, N, N>::NEW);
-        solver.settings.method = QpMethod::Condensed;
+        let base = draw(seed);
+        let mut solver = Box::new(QpSolver::<f64, NX, NU, NG, NGN, N, N>::NEW);
+        solver.settings.method = method;
         solver.settings.warm_active_set = true;
         solver.settings.tol_stat = 1e-10;
         solver.settings.tol_comp = 1e-12;
@@ -1305,7 +1327,15 @@ fn warm_active_set_sequence<const NX: usize, const NU: usize, const N: usize>(
                 s.gu += rng.vec::<NU>(step);
                 s.gx += rng.vec::<NX>(step);
             }
+            let reference = clarabel_solve(&qp);
             let info = solver.solve(&qp);
+            // Moving `x0` can make QPs with state bounds infeasible (then, not judged, the
+            // solver has no warm set for the next).
+            let Some(reference) = reference else {
+                assert_ne!(info.status, QpStatus::Solved, "seed {seed}, QP {j}");
+                counts.infeasible += 1;
+                continue;
+            };
             assert_eq!(
                 info.status,
                 QpStatus::Solved,
@@ -1316,32 +1346,38 @@ fn warm_active_set_sequence<const NX: usize, const NU: usize, const N: usize>(
                 info.res_stat <= st.tol_stat && info.res_ineq <= st.tol_ineq,
                 "seed {seed}, QP {j}: {info:?}"
             );
-            assert!(
-                info.active_set_solves >= 1,
-                "seed {seed}, QP {j}: no warm set"
-            );
             match (info.iterations, info.active_set_solves) {
+                (_, 0) => counts.cold += 1,
                 (0, 1) => counts.held += 1,
                 (0, _) => counts.iterated += 1,
                 _ => counts.interior += 1,
             }
             // The interior point from scratch, polished: the same solution.
-            let mut scratch = Box::new(QpSolver::<f64, NX, NU, 0, 0, N, N>::NEW);
-            scratch.settings = solver.settings;
-            scratch.settings.warm_active_set = false;
-            scratch.settings.polish = true;
-            assert_eq!(scratch.solve(&qp).status, QpStatus::Solved);
-            let (a, b) = (solver.solution(), scratch.solution());
+            let scratch_settings = QpSettings {
+                warm_active_set: false,
+                polish: true,
+                ..solver.settings
+            };
+            let scratch_u = if solver.condensed() {
+                let mut scratch = Box::new(QpSolver::<f64, NX, NU, NG, NGN, N, N>::NEW);
+                scratch.settings = scratch_settings;
+                assert_eq!(scratch.solve(&qp).status, QpStatus::Solved);
+                assert!(scratch.condensed());
+                scratch.solution().u
+            } else {
+                let mut scratch = Box::new(QpSolver::<f64, NX, NU, NG, NGN, N>::NEW);
+                scratch.settings = scratch_settings;
+                assert_eq!(scratch.solve(&qp).status, QpStatus::Solved);
+                scratch.solution().u
+            };
+            let u = &solver.solution().u;
             for k in 0..N {
-                let d = (a.u[k] - b.u[k]).amax();
+                let d = (u[k] - scratch_u[k]).amax();
                 assert!(
-                    d <= 1e-7 * b.u[k].amax().max(1.0),
+                    d <= 1e-7 * scratch_u[k].amax().max(1.0),
                     "seed {seed}, QP {j}, stage {k}: {d:e}"
                 );
             }
-            let Some(reference) = clarabel_solve(&qp) else {
-                continue;
-            };
             if reference.strict_complementarity <= 1e-3 {
                 continue;
             }
@@ -1354,16 +1390,45 @@ fn warm_active_set_sequence<const NX: usize, const NU: usize, const N: usize>(
     counts
 }
 
-/// The warm active set ([`QpSettings::warm_active_set`]) on sequences of related QPs: small
-/// changes (as between control steps) are solved on the last active set in most cases; large
-/// ones need the active-set iterations or the interior point, and every path ends on
-/// clarabel's solution.
+/// [`random_qp`] with its state bounds and general rows, for odd seeds, moved 5 further from
+/// the trajectory they were placed around (so that in most solutions none is active; even
+/// seeds keep them as drawn, and most solutions have some active).
+fn widened_qp<
+    const NX: usize,
+    const NU: usize,
+    const NG: usize,
+    const NGN: usize,
+    const N: usize,
+>(
+    seed: u64,
+) -> OcpQp<f64, NX, NU, NG, NGN, N> {
+    let mut qp = random_qp::<NX, NU, NG, NGN, N>(seed);
+    let m = if seed % 2 == 1 { 5.0 } else { 0.0 };
+    for s in qp.stages.iter_mut() {
+        s.lbx.add_scalar_mut(-m);
+        s.ubx.add_scalar_mut(m);
+        s.lg.add_scalar_mut(-m);
+        s.ug.add_scalar_mut(m);
+    }
+    let t = &mut qp.terminal;
+    t.lbx.add_scalar_mut(-m);
+    t.ubx.add_scalar_mut(m);
+    t.lg.add_scalar_mut(-m);
+    t.ug.add_scalar_mut(m);
+    qp
+}
+
+/// The warm active set ([`QpSettings::warm_active_set`]) of condensed QPs on sequences of
+/// related QPs: small changes (as between control steps) are solved on the last active set
+/// in most cases; large ones need the active-set iterations or the interior point, and
+/// every path ends on clarabel's solution.
 #[test]
 fn the_warm_active_set_solves_related_qps_exactly() {
-    let small = warm_active_set_sequence::<10, 4, 10>(0..30, 0.01);
-    let large = warm_active_set_sequence::<10, 4, 10>(0..30, 0.5);
-    let jumps = warm_active_set_sequence::<3, 4, 4>(0..400, 5.0);
-    let other = warm_active_set_sequence::<6, 3, 20>(0..20, 0.2);
+    let c = QpMethod::Condensed;
+    let small = warm_active_set_sequence::<10, 4, 0, 0, 10>(0..30, 0.01, c, control_bounded_qp);
+    let large = warm_active_set_sequence::<10, 4, 0, 0, 10>(0..30, 0.5, c, control_bounded_qp);
+    let jumps = warm_active_set_sequence::<3, 4, 0, 0, 4>(0..400, 5.0, c, control_bounded_qp);
+    let other = warm_active_set_sequence::<6, 3, 0, 0, 20>(0..20, 0.2, c, control_bounded_qp);
     eprintln!(
         "small steps: {small:?}\nlarge steps: {large:?}\njumps: {jumps:?}\n6x3, N = 20: {other:?}"
     );
@@ -1375,17 +1440,70 @@ fn the_warm_active_set_solves_related_qps_exactly() {
     ] {
         assert!(c.judged >= 60, "{name}: {} judged", c.judged);
         assert!(c.worst <= 1e-7, "{name}: {:e} from clarabel", c.worst);
+        assert_eq!(c.cold, 0, "{name}: a condensed QP without a warm set");
+        assert_eq!(
+            c.infeasible, 0,
+            "{name}: control bounds only, yet infeasible"
+        );
     }
-    let total = |c: &WarmSetCounts| c.held + c.iterated + c.interior;
     assert!(
-        10 * small.held >= 8 * total(&small),
+        10 * small.held >= 8 * small.warm(),
         "small steps: the last active set held in {} of {}",
         small.held,
-        total(&small)
+        small.warm()
     );
     // Every path was taken.
     assert!(large.iterated > 0, "large steps: {large:?}");
     assert!(jumps.interior > 0, "jumps: {jumps:?}");
+}
+
+/// The same with the Riccati recursion: control-bounded QPs (QR-bench's size at N = 20,
+/// and smaller ones), where small changes are solved on the last active set in most cases,
+/// larger ones after active-set moves, and large jumps fall back to the interior point; and
+/// QPs with state bounds and general
+/// rows, where the warm set is taken only after a solution with control bounds alone
+/// active. Every solve ends on clarabel's solution and on the polished interior point's.
+#[test]
+fn the_warm_active_set_solves_related_qps_exactly_with_the_riccati_recursion() {
+    let r = QpMethod::Riccati;
+    let small = warm_active_set_sequence::<10, 4, 0, 0, 20>(0..20, 0.01, r, control_bounded_qp);
+    let large = warm_active_set_sequence::<6, 3, 0, 0, 20>(0..20, 0.2, r, control_bounded_qp);
+    let jumps = warm_active_set_sequence::<3, 4, 0, 0, 4>(0..400, 5.0, r, control_bounded_qp);
+    let general = warm_active_set_sequence::<4, 2, 2, 1, 10>(0..100, 0.05, r, widened_qp);
+    eprintln!(
+        "small steps: {small:?}\nlarge steps: {large:?}\njumps: {jumps:?}\ngeneral rows: {general:?}"
+    );
+    for (name, c) in [
+        ("small", &small),
+        ("large", &large),
+        ("jumps", &jumps),
+        ("general", &general),
+    ] {
+        assert!(c.judged >= 60, "{name}: {} judged", c.judged);
+        assert!(c.worst <= 1e-7, "{name}: {:e} from clarabel", c.worst);
+    }
+    for (name, c) in [("small", &small), ("large", &large), ("jumps", &jumps)] {
+        assert_eq!(c.cold, 0, "{name}: control bounds only, yet no warm set");
+        assert_eq!(
+            c.infeasible, 0,
+            "{name}: control bounds only, yet infeasible"
+        );
+    }
+    assert!(
+        10 * small.held >= 8 * small.warm(),
+        "small steps: the last active set held in {} of {}",
+        small.held,
+        small.warm()
+    );
+    // Every path was taken.
+    assert!(large.iterated > 0, "large steps: {large:?}");
+    assert!(jumps.interior > 0, "jumps: {jumps:?}");
+    // With state bounds and general rows, some solutions have only control bounds active
+    // (the warm set is taken after them) and some have others (none is).
+    assert!(
+        general.cold > 0 && general.warm() > 0,
+        "general: {general:?}"
+    );
 }
 
 /// Bounds removed between solves leave the warm active set without them (the entries they
@@ -1393,12 +1511,18 @@ fn the_warm_active_set_solves_related_qps_exactly() {
 /// trace: the next valid solve gives the solution a new solver finds.
 #[test]
 fn the_warm_active_set_follows_the_bounds_and_survives_bad_input() {
+    warm_set_follows_bounds(QpMethod::Condensed);
+    warm_set_follows_bounds(QpMethod::Riccati);
+}
+
+fn warm_set_follows_bounds(method: QpMethod) {
     type S = QpSolver<f64, 4, 2, 0, 0, 8, 8>;
     let mut qp = control_bounded_qp::<4, 2, 8>(3);
     let mut solver = Box::new(S::NEW);
-    solver.settings.method = QpMethod::Condensed;
+    solver.settings.method = method;
     solver.settings.warm_active_set = true;
     assert_eq!(solver.solve(&qp).status, QpStatus::Solved);
+    assert_eq!(solver.condensed(), method == QpMethod::Condensed);
     // Some bound is active: find one by the solution and remove it.
     let (k, i, upper) = (0..8)
         .flat_map(|k| (0..2).map(move |i| (k, i)))
@@ -1436,8 +1560,8 @@ fn the_warm_active_set_follows_the_bounds_and_survives_bad_input() {
             .all(|(x, y)| (x - y).amax() <= 1e-7 * y.amax().max(1.0))
     };
     let info = solver.solve(&qp);
-    assert_eq!(info.status, QpStatus::Solved, "{info:?}");
-    assert!(info.active_set_solves >= 1);
+    assert_eq!(info.status, QpStatus::Solved, "{method:?}: {info:?}");
+    assert!(info.active_set_solves >= 1, "{method:?}: {info:?}");
     let u = solver.solution().u;
     assert!(close(&u, &fresh(&qp)), "bound removed: {u:?}");
     // The bound held the entry: without it the entry goes past where the bound was, which

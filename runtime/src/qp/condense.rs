@@ -381,25 +381,27 @@ impl<
     }
 
     /// Keeps `lower` / `upper` as the active set a warm start begins from.
-    fn store_active_set(&mut self, lower: &[[bool; NU]; N], upper: &[[bool; NU]; N]) {
-        for (a, l) in self.act_lo.iter_mut().zip(lower) {
-            *a = *l;
-        }
-        for (a, u) in self.act_hi.iter_mut().zip(upper) {
-            *a = *u;
-        }
+    pub(super) fn store_active_set(&mut self, lower: &[[bool; NU]; N], upper: &[[bool; NU]; N]) {
+        (self.act_lo, self.act_hi) = (*lower, *upper);
         self.act_valid = true;
     }
 
-    /// The stored active set, as the solve's arrays.
-    fn stored_active_set(&self) -> ([[bool; NU]; N], [[bool; NU]; N]) {
-        let (mut lower, mut upper) = ([[false; NU]; N], [[false; NU]; N]);
-        for (l, a) in lower.iter_mut().zip(&self.act_lo) {
-            *l = *a;
+    /// The stored active set.
+    pub(super) fn stored_active_set(&self) -> ([[bool; NU]; N], [[bool; NU]; N]) {
+        (self.act_lo, self.act_hi)
+    }
+
+    /// The stored active set less the bounds the loaded QP does not have (a bound that is
+    /// both takes the lower side), stored again and returned.
+    pub(super) fn present_active_set(&mut self) -> ([[bool; NU]; N], [[bool; NU]; N]) {
+        let (mut lower, mut upper) = self.stored_active_set();
+        for (k, r) in self.ru.iter().enumerate() {
+            for i in 0..NU {
+                lower[k][i] &= r.has_lo[i];
+                upper[k][i] &= !lower[k][i] && r.has_hi[i];
+            }
         }
-        for (u, a) in upper.iter_mut().zip(&self.act_hi) {
-            *u = *a;
-        }
+        self.store_active_set(&lower, &upper);
         (lower, upper)
     }
 
@@ -430,7 +432,7 @@ impl<
     /// Moves the stored active set one stage forward (the last stage's is repeated), as a
     /// real-time iteration that shifts its trajectory does.
     pub fn shift_active_set(&mut self) {
-        for k in 1..NC {
+        for k in 1..N {
             self.act_lo[k - 1] = self.act_lo[k];
             self.act_hi[k - 1] = self.act_hi[k];
         }
@@ -439,15 +441,7 @@ impl<
     /// The preparation of a warm active set: the stored set, less the bounds the QP no
     /// longer has, kept and factorized. Returns whether the factorization succeeded.
     pub(super) fn prepare_active_set(&mut self) -> bool {
-        let (mut lower, mut upper) = self.stored_active_set();
-        for k in 0..NC.min(N) {
-            let r = &self.ru[k];
-            for i in 0..NU {
-                lower[k][i] &= r.has_lo[i];
-                upper[k][i] &= !lower[k][i] && r.has_hi[i];
-            }
-        }
-        self.store_active_set(&lower, &upper);
+        let (lower, upper) = self.present_active_set();
         self.factorize_on_active_set(&lower, &upper)
     }
 

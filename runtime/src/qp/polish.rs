@@ -32,7 +32,7 @@
 //! meet the tolerances; else the interior point's solution is kept. QPs with soft rows are
 //! not polished.
 
-use super::{OcpQp, QpSolution, QpSolver, Vect};
+use super::{Newton, OcpQp, QpSolution, QpSolver, Vect};
 use crate::kernels::tr_mul;
 use crate::real::Real;
 use crate::rows::{Rows, Soft};
@@ -195,16 +195,27 @@ fn on<T: Real, const K: usize>(sides: &[Side; K], v: &Vect<T, K>) -> Vect<T, K> 
     a
 }
 
-/// The weights a row set adds to the Hessian along its rows: the interior point's barrier
-/// weights (`active` `None`), or the polish's, `w` on the active rows and none elsewhere.
+/// The weights a row set adds to the Newton system's Hessian along its rows.
+#[derive(Clone, Copy)]
+pub(super) enum Weight<'a, T, const K: usize> {
+    /// The interior point's barrier weights.
+    Barrier,
+    /// The polish's: `w` on the active rows, none on the others.
+    Active(&'a [Side; K], T),
+    /// None.
+    Zero,
+}
+
+/// The weights a row set adds to the Hessian along its rows ([`Weight`]).
 pub(super) fn weights<T: Real, const K: usize>(
     rows: &Rows<T, K>,
     soft: Option<&Soft<T, K>>,
-    active: Option<(&[Side; K], T)>,
+    weight: Weight<'_, T, K>,
 ) -> Vect<T, K> {
-    match active {
-        None => rows.sigma(soft),
-        Some((sides, w)) => {
+    match weight {
+        Weight::Barrier => rows.sigma(soft),
+        Weight::Zero => Vect::zeros(),
+        Weight::Active(sides, w) => {
             let mut v = Vect::<T, K>::zeros();
             for (vi, side) in v.iter_mut().zip(sides) {
                 if *side != Side::Free {
@@ -217,7 +228,7 @@ pub(super) fn weights<T: Real, const K: usize>(
 }
 
 /// The interior point's active sides: those whose multiplier exceeds their slack.
-fn initial_sides<T: Real, const K: usize>(r: &Rows<T, K>) -> [Side; K] {
+pub(super) fn initial_sides<T: Real, const K: usize>(r: &Rows<T, K>) -> [Side; K] {
     let mut sides = [Side::Free; K];
     for (i, side) in sides.iter_mut().enumerate() {
         let lower = r.has_lo[i] && r.ll[i] > r.tl[i];
@@ -230,6 +241,11 @@ fn initial_sides<T: Real, const K: usize>(r: &Rows<T, K>) -> [Side; K] {
         };
     }
     sides
+}
+
+/// Whether no side is active by [`initial_sides`]' rule.
+pub(super) fn all_free<T: Real, const K: usize>(r: &Rows<T, K>) -> bool {
+    initial_sides(r).iter().all(|s| *s == Side::Free)
 }
 
 /// Distance of the active rows' values `v` from their bounds (zero on free rows).
@@ -362,7 +378,7 @@ impl<
         // random QPs with general rows).
         let mut cur = self.sol;
         for _ in 0..ROUNDS {
-            if !self.factorize(qp, Some(&act)) {
+            if !self.factorize(qp, Newton::Polish(&act)) {
                 break;
             }
             self.refine_on(qp, &act, &mut y, REFINE_STEPS);
@@ -576,7 +592,7 @@ impl<
         self.gnt = t.q * xn + t.gx + self.rxn.scatter(&wr.xn) - self.rxn.scatter(&y.xn)
             + tr_mul(&t.c, &tg)
             - prev;
-        self.lq_solve(qp);
+        self.lq_solve(qp, None);
         // The corrections, and the active rows' multipliers' dy = -w (r_a + a'dz): from the
         // residual and the correction rather than from the rows at the new point, whose
         // rounding `w` would amplify.

@@ -1,0 +1,312 @@
+//! The warm active set for QPs the Riccati recursion solves ([`QpSettings::warm_active_set`];
+//! a condensed QP has its own, in `condense.rs`).
+//!
+//! A real-time iteration's QPs change little from one control step to the next, and so do
+//! the control bounds that hold in their solutions. Holding those controls on their bounds
+//! (and no other row), the QP is an equality-constrained linear-quadratic problem: the
+//! Riccati recursion with no barrier weight, the held controls' rows and columns of
+//! `R~ = R + B'PB` replaced by the identity and their rows of `S~ = S + B'PA` by zeros, so
+//! that `P` is the recursion's over the free controls alone. None of it depends on `x0`:
+//! [`QpSolver::prepare`] factorizes it. The solve is then `1 + settings.refine` Newton
+//! steps from zero with the held controls on their bounds (a backward and a forward vector
+//! pass each; the held controls' steps are zero), which give the active-set QP's solution
+//! and its dynamics multipliers. The bounds' multipliers follow from the controls'
+//! stationarity, `mu = R u + S x + gu + B'pi` (`lam_l - lam_u`).
+//!
+//! The result is the QP's solution if the rows, set from it (held bounds at zero slack
+//! with the multipliers `max(mu, 0)` on a lower bound and `max(-mu, 0)` on an upper one,
+//! every other row free with its slack from the values and multiplier zero), meet the
+//! interior point's own stopping test: its stationarity, dynamics and inequality residuals
+//! within the tolerances (a held bound with a multiplier of the wrong sign shows in the
+//! stationarity residual, a free row past its bound in the inequality residual;
+//! complementarity is zero). One more Newton step is taken where the first misses (rounding
+//! at tight tolerances); if that misses too, the interior point solves the QP from the
+//! start, warm-started from the rows as set.
+//!
+//! The set is taken from each interior-point solution (the control bounds whose multiplier
+//! exceeds their slack) only when no other row is active and the QP has no soft row;
+//! otherwise there is no warm set until such a solution comes.
+
+use super::polish::{Side, all_free, initial_sides};
+use super::{Newton, OcpQp, QpInfo, QpSolution, QpSolver, QpStatus};
+use crate::kernels::{mul, mul_sparse, tr_mul};
+use crate::real::Real;
+
+/// Active-set moves after a warm set that missed, at most (each one factorization), before
+/// the interior point takes over.
+const ITERATIONS: usize = 4;
+
+impl<
+    T: Real,
+    const NX: usize,
+    const NU: usize,
+    const NG: usize,
+    const NGN: usize,
+    const N: usize,
+    const NC: usize,
+    const NBX: usize,
+    const NR: usize,
+> QpSolver<T, NX, NU, NG, NGN, N, NC, NBX, NR>
+{
+    /// Whether the loaded QP has a soft row (the warm active set leaves such QPs to the
+    /// interior point).
+    fn any_soft(&self) -> bool {
+        self.sg.iter().any(|s| s.any) || self.sgn.any
+    }
+
+    /// The preparation of the warm active set of the Riccati recursion: the stored set, less
+    /// the bounds the QP no longer has, factorized. Returns whether the factorization
+    /// succeeded (`false` also without Riccati storage or with soft rows).
+    pub(super) fn prepare_held<const NH: usize>(
+        &mut self,
+        qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>,
+    ) -> bool {
+        if NR != N || self.any_soft() {
+            return false;
+        }
+        let (lower, upper) = self.present_active_set();
+        self.factorize(qp, Newton::Held(&held(&lower, &upper)))
+    }
+
+    /// The solve on the warm active set that [`prepare_held`](Self::prepare_held)
+    /// factorized (module docs). `Ok` with the solve's outcome, or `Err` with the active-set
+    /// solves spent when the interior point must solve the QP (also for a non-finite `x0`,
+    /// which it reports; nothing is changed then).
+    #[inline(never)]
+    pub(super) fn solve_held<const NH: usize>(
+        &mut self,
+        qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>,
+    ) -> Result<QpInfo<T>, u32> {
+        if NR != N || !qp.x0.iter().all(|v| v.finite()) {
+            return Err(0);
+        }
+        let (mut lower, mut upper) = self.stored_active_set();
+        self.sol = QpSolution::NEW;
+        if let Some(x) = self.sol.x.first_mut() {
+            *x = qp.x0;
+        }
+        let mut solves = 0;
+        for round in 0..=ITERATIONS {
+            // Each round after the first moves the set and factorizes it.
+            if round > 0 {
+                if !self.move_held_set(qp, &mut lower, &mut upper) {
+                    return Err(solves);
+                }
+                self.store_active_set(&lower, &upper);
+                if !self.factorize(qp, Newton::Held(&held(&lower, &upper))) {
+                    self.act_valid = false;
+                    return Err(solves);
+                }
+            }
+            let fixed = held(&lower, &upper);
+            for (k, u) in self.sol.u.iter_mut().enumerate() {
+                let r = &self.ru[k];
+                for i in 0..NU {
+                    if lower[k][i] {
+                        u[i] = r.lo[i];
+                    } else if upper[k][i] {
+                        u[i] = r.hi[i];
+                    }
+                }
+            }
+            let mut steps = 1 + self.settings.refine;
+            for retry in [false, true] {
+                solves += 1;
+                for _ in 0..steps {
+                    self.held_step(qp, &fixed);
+                }
+                let res = self.hold_rows(qp, &lower, &upper);
+                let st = &self.settings;
+                let within = |f: T| {
+                    res[0] <= st.tol_stat * f
+                        && res[1] <= st.tol_eq * f
+                        && res[2] <= st.tol_ineq * f
+                };
+                if within(T::ONE) {
+                    self.dual_valid = true;
+                    self.polished = false;
+                    self.on_active_set = true;
+                    return Ok(QpInfo {
+                        status: QpStatus::Solved,
+                        iterations: 0,
+                        active_set_solves: solves,
+                        res_stat: res[0],
+                        res_eq: res[1],
+                        res_ineq: res[2],
+                        mu: T::ZERO,
+                    });
+                }
+                // Rounding (tight tolerances on an ill-conditioned QP) leaves residuals near
+                // the tolerances, and one more step mends them; a set that no longer holds
+                // leaves a bound violated or a multiplier of the wrong sign, which it does
+                // not: the set moves.
+                if retry || !within(T::lit(1e4)) {
+                    break;
+                }
+                steps = 1;
+            }
+        }
+        Err(solves)
+    }
+
+    /// A primal-dual active-set move from the current point on the held set: a held control
+    /// whose multiplier `mu = R u + S x + gu + B'pi` has the wrong sign is freed, a free one
+    /// past a bound is held on it. Returns `false` if nothing moved (the miss is a state
+    /// bound's or a general row's, or rounding's), or a control would be held on a bound
+    /// the QP lacks.
+    fn move_held_set<const NH: usize>(
+        &self,
+        qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>,
+        lower: &mut [[bool; NU]; N],
+        upper: &mut [[bool; NU]; N],
+    ) -> bool {
+        let tol = self.settings.tol_ineq.max(self.settings.tol_stat);
+        let mut moved = false;
+        for k in 0..N {
+            let s = &qp.stages[k];
+            let h = qp.h(k);
+            let (x, u) = (self.sol.x[k], self.sol.u[k]);
+            let mu = mul(&h.r, &u) + mul(&h.s, &x) + s.gu + tr_mul(&s.b, &self.sol.pi[k]);
+            let r = &self.ru[k];
+            for i in 0..NU {
+                let (m, v) = (mu[i], u[i]);
+                let (lo, hi) = (&mut lower[k][i], &mut upper[k][i]);
+                let pinned = r.has_lo[i] && r.has_hi[i] && r.hi[i] <= r.lo[i];
+                let scale = T::ONE.max(m.abs());
+                if (*lo && m < -tol * scale && !pinned) || (*hi && m > tol * scale && !pinned) {
+                    (*lo, *hi) = (false, false);
+                    moved = true;
+                } else if !*lo && !*hi {
+                    let vs = tol * T::ONE.max(v.abs());
+                    if r.has_lo[i] && v < r.lo[i] - vs {
+                        *lo = true;
+                        moved = true;
+                    } else if r.has_hi[i] && v > r.hi[i] + vs {
+                        *hi = true;
+                        moved = true;
+                    }
+                }
+            }
+        }
+        moved
+    }
+
+    /// One Newton step of the QP on the held set from the current point: the gradients and
+    /// dynamics residuals there, the Riccati solve with the held controls' steps zero, and
+    /// the update (the dynamics multipliers are the solve's).
+    fn held_step<const NH: usize>(
+        &mut self,
+        qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>,
+        fixed: &[[bool; NU]; N],
+    ) {
+        for k in 0..N {
+            let s = &qp.stages[k];
+            let h = qp.h(k);
+            let (x, u) = (self.sol.x[k], self.sol.u[k]);
+            let next = if k + 1 < N {
+                self.sol.x[k + 1]
+            } else {
+                self.sol.xn
+            };
+            self.rbt[k] = mul_sparse(&s.a, &x) + mul_sparse(&s.b, &u) + s.f - next;
+            self.gxt[k] = mul(&h.q, &x) + tr_mul(&h.s, &u) + s.gx;
+            self.gut[k] = mul(&h.r, &u) + mul(&h.s, &x) + s.gu;
+        }
+        let t = &qp.terminal;
+        self.gnt = mul(&t.q, &self.sol.xn) + t.gx;
+        self.lq_solve(qp, Some(fixed));
+        for k in 0..N {
+            if k > 0 {
+                self.sol.x[k] += self.dx[k];
+            }
+            self.sol.u[k] += self.du[k];
+            self.sol.pi[k] = self.pi_new[k];
+        }
+        self.sol.xn += self.dxn;
+    }
+
+    /// Sets every row from the current point as the module docs say and returns the
+    /// interior point's residuals there: `[stationarity, dynamics, inequality, 0]`.
+    fn hold_rows<const NH: usize>(
+        &mut self,
+        qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>,
+        lower: &[[bool; NU]; N],
+        upper: &[[bool; NU]; N],
+    ) -> [T; 4] {
+        for k in 0..N {
+            let s = &qp.stages[k];
+            let h = qp.h(k);
+            let (x, u) = (self.sol.x[k], self.sol.u[k]);
+            let mu = mul(&h.r, &u) + mul(&h.s, &x) + s.gu + tr_mul(&s.b, &self.sol.pi[k]);
+            self.ru[k].hold(&u, &mu, &lower[k], &upper[k]);
+            self.rx[k].hold_free(&x);
+            if NG > 0 {
+                self.rg[k].hold_free(&(mul(&s.c, &x) + mul(&s.d, &u)));
+            }
+        }
+        let xn = self.sol.xn;
+        self.rxn.hold_free(&xn);
+        if NGN > 0 {
+            self.rgn.hold_free(&mul(&qp.terminal.c, &xn));
+        }
+        let mut res = self.residuals(qp);
+        res[0] = self.stationarity(qp);
+        res[3] = T::ZERO;
+        res
+    }
+
+    /// Whether the last solution, from the warm active set, meets the current settings'
+    /// tolerances (the rows hold it).
+    pub(super) fn held_solution_optimal<const NH: usize>(
+        &mut self,
+        qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>,
+    ) -> bool {
+        let mut res = self.residuals(qp);
+        res[0] = self.stationarity(qp);
+        let st = &self.settings;
+        res[0] <= st.tol_stat && res[1] <= st.tol_eq && res[2] <= st.tol_ineq
+    }
+
+    /// Stores the active set of an interior-point solution of the Riccati recursion for the
+    /// next solve: the control bounds whose multiplier exceeds their slack, if no other row
+    /// is active by that rule and the QP has no soft row; else no warm set.
+    pub(super) fn held_set_of_interior_point(&mut self) {
+        if NR != N || self.any_soft() {
+            self.act_valid = false;
+            return;
+        }
+        let free = all_free(&*self.rxn)
+            && all_free(&self.rgn)
+            && self
+                .rx
+                .iter()
+                .zip(&self.rg)
+                .all(|(x, g)| all_free(&**x) && all_free(g));
+        if !free {
+            self.act_valid = false;
+            return;
+        }
+        let (mut lower, mut upper) = ([[false; NU]; N], [[false; NU]; N]);
+        for (k, r) in self.ru.iter().enumerate() {
+            for (i, side) in initial_sides(r).iter().enumerate() {
+                lower[k][i] = *side == Side::Lower;
+                upper[k][i] = *side == Side::Upper;
+            }
+        }
+        self.store_active_set(&lower, &upper);
+    }
+}
+
+/// The held entries: on either bound.
+fn held<const NU: usize, const N: usize>(
+    lower: &[[bool; NU]; N],
+    upper: &[[bool; NU]; N],
+) -> [[bool; NU]; N] {
+    let mut h = [[false; NU]; N];
+    for k in 0..N {
+        for i in 0..NU {
+            h[k][i] = lower[k][i] || upper[k][i];
+        }
+    }
+    h
+}
