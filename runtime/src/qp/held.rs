@@ -1,5 +1,6 @@
-//! The warm active set for QPs the Riccati recursion solves ([`QpSettings::warm_active_set`];
-//! a condensed QP has its own, in `condense.rs`).
+//! The warm active set for QPs the Riccati recursion solves
+//! ([`QpSettings::warm_active_set`](crate::QpSettings::warm_active_set); a condensed QP has
+//! its own, in `condense.rs`).
 //!
 //! A real-time iteration's QPs change little from one control step to the next, and so do
 //! the control bounds that hold in their solutions. Holding those controls on their bounds
