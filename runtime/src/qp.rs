@@ -1008,6 +1008,14 @@ impl<
             self.expand(qp);
             return info;
         }
+        // The warm active set of the Riccati recursion, for the next solve.
+        if self.settings.warm_active_set {
+            if info.status == QpStatus::Solved {
+                self.held_set_of_interior_point();
+            } else {
+                self.act_valid = false;
+            }
+        }
         // Not for solvers with condensing storage, whose QPs are condensed but when a state
         // bound or general row appears: that keeps this polish (11 KB of code on a
         // Cortex-M4F, which has 1 KB to spare under its 64 KiB target) out of their builds.
@@ -1018,13 +1026,6 @@ impl<
         // 1e15 and more, and rounding in the Riccati recursion (`P = ... - W'W`) can leave
         // `R + B'PB` indefinite, while the active set is long settled. The polish solves
         // the QP on that set without barrier weights.
-        if self.settings.warm_active_set {
-            if info.status == QpStatus::Solved {
-                self.held_set_of_interior_point();
-            } else {
-                self.act_valid = false;
-            }
-        }
         let limit = info.status == QpStatus::MaxIterations;
         let broke = info.status == QpStatus::NumericalError && info.iterations > 0;
         if NC == 0
