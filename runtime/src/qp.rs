@@ -346,10 +346,11 @@ pub struct QpSettings<T> {
     /// change little from one control step to the next, so the set usually holds and the
     /// feedback is a few products. The solution is exact where the set holds;
     /// [`QpInfo::iterations`] is then 0 and [`QpInfo::active_set_solves`] counts the
-    /// solves. With the Riccati recursion the set is taken only from solutions with no
-    /// active row other than a control bound, and QPs with soft rows are left to the
-    /// interior point. Default: off ([`RtiSettings::DEFAULT`](crate::RtiSettings) turns it
-    /// on).
+    /// solves. A solver's first QP (none solved since it was built) starts from the empty
+    /// set: the unconstrained solution, then the active-set iterations. With the Riccati
+    /// recursion the set is taken only from solutions with no active row other than a
+    /// control bound, and QPs with soft rows are left to the interior point. Default: off
+    /// ([`RtiSettings::DEFAULT`](crate::RtiSettings) turns it on).
     pub warm_active_set: bool,
 }
 
@@ -589,6 +590,9 @@ pub struct QpSolver<
     act_lo: [[bool; NU]; N],
     act_hi: [[bool; NU]; N],
     act_valid: bool,
+    /// A solve has been attempted since the solver was built (before it, a warm active set
+    /// starts from the empty set).
+    solved_before: bool,
     /// The last [`prepare`](Self::prepare) factorized the condensed Hessian, or the Riccati
     /// recursion, on the stored active set (with the settings `prefactor_settings`); the
     /// next solve starts there.
@@ -782,6 +786,7 @@ impl<
         act_lo: [[false; NU]; N],
         act_hi: [[false; NU]; N],
         act_valid: false,
+        solved_before: false,
         guessed: false,
         on_active_set: false,
         tri: [[crate::zeros(); NC]; NC],
@@ -947,6 +952,11 @@ impl<
             self.condensed || (NR == N && self.check_stages(qp) && self.load_bounds(qp).is_ok());
         // The last solve's active set, factorized: the solve starts there (and the interior
         // point, if it is needed, from scratch).
+        // A solver's first QP has no last active set: it starts from the empty one (the
+        // unconstrained solution, then active-set moves).
+        if ready && self.settings.warm_active_set && !self.act_valid && !self.solved_before {
+            self.store_active_set(&[[false; NU]; N], &[[false; NU]; N]);
+        }
         if ready && self.settings.warm_active_set && self.act_valid {
             self.guessed = if self.condensed {
                 self.prepare_active_set()
@@ -977,6 +987,7 @@ impl<
         qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>,
     ) -> QpInfo<T> {
         self.on_active_set = false;
+        self.solved_before = true;
         let guessed = core::mem::replace(&mut self.guessed, false)
             && self.prefactor_settings == self.settings;
         let mut solves = 0;

@@ -1262,7 +1262,7 @@ fn a_loose_interior_point_then_the_polish_solves_qps_exactly() {
 /// Outcome counts of [`warm_active_set_sequence`].
 #[derive(Debug, Default)]
 struct WarmSetCounts {
-    /// Follow-up QPs judged (a reference solution, not nearly degenerate).
+    /// QPs judged, the first ones included (a reference solution, not nearly degenerate).
     judged: usize,
     /// Solved on the last solve's active set, no other solve.
     held: usize,
@@ -1274,6 +1274,10 @@ struct WarmSetCounts {
     /// Solved with no warm set to start from (the Riccati recursion's, when the last
     /// solution had an active row other than a control bound).
     cold: usize,
+    /// First solves (each draw's QP, from the empty set) solved by active-set moves alone, and
+    /// by the interior point after them.
+    first_exact: usize,
+    first_interior: usize,
     /// Follow-ups clarabel found infeasible (not judged).
     infeasible: usize,
     /// Largest difference from clarabel (relative, as [`compare`]).
@@ -1287,9 +1291,9 @@ impl WarmSetCounts {
 }
 
 /// Sequences of related QPs as a real-time iteration meets them: each draw's QP (`draw`),
-/// then 6 more with `x0` and the gradients moved by random amounts of size `step`. A
+/// then 6 more with `x0` and the gradients moved by random amounts of size `step`. A new
 /// solver (`NC = N`: condensing storage) with the warm active set and `method` solves them
-/// in turn; every follow-up must be solved within the tolerances and, where judged, match
+/// in turn (the first from the empty set); every one must be solved within the tolerances and, where judged, match
 /// clarabel to 1e-7 (relative), and its result must match the interior point's from
 /// scratch, polished (by a solver without condensing storage where the QP is not
 /// condensed, as only that one polishes it). Counts how each was solved.
@@ -1313,19 +1317,16 @@ fn warm_active_set_sequence<
         solver.settings.warm_active_set = true;
         solver.settings.tol_stat = 1e-10;
         solver.settings.tol_comp = 1e-12;
-        let first = solver.solve(&base);
-        assert_eq!(first.status, QpStatus::Solved, "seed {seed}");
-        assert_eq!(
-            first.active_set_solves, 0,
-            "no active set before the first solve"
-        );
         let mut rng = support::Rng::new(seed ^ 0x5eed);
         let mut qp = base;
-        for j in 0..6 {
-            qp.x0 += rng.vec::<NX>(step);
-            for s in qp.stages.iter_mut() {
-                s.gu += rng.vec::<NU>(step);
-                s.gx += rng.vec::<NX>(step);
+        // QP 0 is the draw itself, the solver's first: it starts from the empty set.
+        for j in 0..7 {
+            if j > 0 {
+                qp.x0 += rng.vec::<NX>(step);
+                for s in qp.stages.iter_mut() {
+                    s.gu += rng.vec::<NU>(step);
+                    s.gx += rng.vec::<NX>(step);
+                }
             }
             let reference = clarabel_solve(&qp);
             let info = solver.solve(&qp);
@@ -1347,6 +1348,11 @@ fn warm_active_set_sequence<
                 "seed {seed}, QP {j}: {info:?}"
             );
             match (info.iterations, info.active_set_solves) {
+                _ if j == 0 => {
+                    assert!(info.active_set_solves >= 1, "seed {seed}: {info:?}");
+                    counts.first_exact += usize::from(info.iterations == 0);
+                    counts.first_interior += usize::from(info.iterations > 0);
+                }
                 (_, 0) => counts.cold += 1,
                 (0, 1) => counts.held += 1,
                 (0, _) => counts.iterated += 1,
@@ -1452,9 +1458,13 @@ fn the_warm_active_set_solves_related_qps_exactly() {
         small.held,
         small.warm()
     );
-    // Every path was taken.
+    // Every path was taken, the first solves' (from the empty set) too.
     assert!(large.iterated > 0, "large steps: {large:?}");
     assert!(jumps.interior > 0, "jumps: {jumps:?}");
+    assert!(
+        small.first_exact > 0 && jumps.first_interior > 0,
+        "{small:?} {jumps:?}"
+    );
 }
 
 /// The same with the Riccati recursion: control-bounded QPs (QR-bench's size at N = 20,
@@ -1495,9 +1505,13 @@ fn the_warm_active_set_solves_related_qps_exactly_with_the_riccati_recursion() {
         small.held,
         small.warm()
     );
-    // Every path was taken.
+    // Every path was taken, the first solves' (from the empty set) too.
     assert!(large.iterated > 0, "large steps: {large:?}");
     assert!(jumps.interior > 0, "jumps: {jumps:?}");
+    assert!(
+        small.first_exact > 0 && jumps.first_interior > 0,
+        "{small:?} {jumps:?}"
+    );
     // With state bounds and general rows, some solutions have only control bounds active
     // (the warm set is taken after them) and some have others (none is).
     assert!(
