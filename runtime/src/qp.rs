@@ -1437,19 +1437,33 @@ impl<
         rs / gscale
     }
 
-    /// Backward Riccati factorization of the Newton system's Hessian: the interior point's
-    /// (`active` `None`: each row's barrier weight `sigma`), or the polish's (the rows of
-    /// the active set with its penalty weight, the others none).
+    /// Backward Riccati factorization of the Newton system's Hessian (`mode`: the interior
+    /// point's, each row with its barrier weight `sigma`; the polish's, the rows of its
+    /// active set with its penalty weight, the others none; or the warm active set's).
     fn factorize<const NH: usize>(
         &mut self,
         qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>,
         mode: Newton<'_, T, NBX, NU, NG, NGN, N>,
     ) -> bool {
-        if N == 0 {
-            return true;
-        }
         if self.dense() {
-            return self.condensed_factorize();
+            return N == 0 || self.condensed_factorize();
+        }
+        self.factorize_stages(qp, mode, N)
+    }
+
+    /// The Riccati factorization of stages `stages - 1` down to 0 (and of the terminal
+    /// stage if `stages == N`), from `P_stages` as the last factorization left it. A
+    /// factorization whose `mode` and QP differ from the last one's only at those stages
+    /// ends as a whole one would, bit for bit: the recursion runs backward, and stage `k`
+    /// reads only `P_{k+1}`.
+    fn factorize_stages<const NH: usize>(
+        &mut self,
+        qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>,
+        mode: Newton<'_, T, NBX, NU, NG, NGN, N>,
+        stages: usize,
+    ) -> bool {
+        if stages < N {
+            return self.factorize_from(qp, mode, stages);
         }
         let t = &qp.terminal;
         // P_N = Q_N + Sigma_xN + C_N' Sigma_gN C_N, built in place in pn[N - 1].
@@ -1468,8 +1482,18 @@ impl<
             mul_sparse_add_into(last, &scaled_transpose(&sg, &t.c), &t.c);
         }
         symmetrize(last);
+        self.factorize_from(qp, mode, N)
+    }
+
+    /// Stages `stages - 1` down to 0 of [`factorize_stages`](Self::factorize_stages).
+    fn factorize_from<const NH: usize>(
+        &mut self,
+        qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>,
+        mode: Newton<'_, T, NBX, NU, NG, NGN, N>,
+        stages: usize,
+    ) -> bool {
         // P_{k+1} is read in pn[k] by stage k, which builds P_k in pn[k - 1].
-        for k in (0..N).rev() {
+        for k in (0..stages.min(N)).rev() {
             let s = &qp.stages[k];
             let h = qp.h(k);
             let (done, rest) = self.pn.split_at_mut(k);

@@ -90,11 +90,19 @@ impl<
         for round in 0..=ITERATIONS {
             // Each round after the first moves the set and factorizes it.
             if round > 0 {
+                let before = held(&lower, &upper);
                 if !self.move_held_set(qp, &mut lower, &mut upper) {
                     return Err(solves);
                 }
                 self.store_active_set(&lower, &upper);
-                if !self.factorize(qp, Newton::Held(&held(&lower, &upper))) {
+                // The recursion runs backward: the stages after the last one whose held
+                // controls changed keep their factorization (the last one's, on this QP).
+                let now = held(&lower, &upper);
+                let stages = (0..N)
+                    .rev()
+                    .find(|&k| now[k] != before[k])
+                    .map_or(0, |k| k + 1);
+                if !self.factorize_stages(qp, Newton::Held(&now), stages) {
                     self.act_valid = false;
                     return Err(solves);
                 }
@@ -310,4 +318,64 @@ fn held<const NU: usize, const N: usize>(
         }
     }
     h
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{SMatrix, SVector};
+
+    /// A deterministic QP of 6 stages (3 states, 2 controls, control bounds) with data from
+    /// a small congruential generator, and its solver with the bounds loaded.
+    fn qp_and_solver() -> (OcpQp<f64, 3, 2, 0, 0, 6, 6>, QpSolver<f64, 3, 2, 0, 0, 6>) {
+        let mut seed = 12345u64;
+        let mut draw = move || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        let mut qp = OcpQp::<f64, 3, 2, 0, 0, 6, 6>::NEW;
+        for (s, h) in qp.stages.iter_mut().zip(qp.hessians.iter_mut()) {
+            s.a = SMatrix::from_fn(|i, j| f64::from(u8::from(i == j)) + 0.3 * draw());
+            s.b = SMatrix::from_fn(|_, _| draw());
+            s.f = SVector::from_fn(|_, _| draw());
+            s.gx = SVector::from_fn(|_, _| draw());
+            s.gu = SVector::from_fn(|_, _| draw());
+            s.lbu = SVector::repeat(-0.2);
+            s.ubu = SVector::repeat(0.3);
+            let m = SMatrix::<f64, 5, 5>::from_fn(|_, _| draw());
+            let w = m * m.transpose() + SMatrix::<f64, 5, 5>::identity() * 0.1;
+            h.q = w.fixed_view::<3, 3>(0, 0).into();
+            h.s = w.fixed_view::<2, 3>(3, 0).into();
+            h.r = w.fixed_view::<2, 2>(3, 3).into();
+        }
+        qp.terminal.q = SMatrix::identity() * 2.0;
+        let mut solver = QpSolver::<f64, 3, 2, 0, 0, 6>::NEW;
+        assert!(solver.check_stages(&qp) && solver.load_bounds(&qp).is_ok());
+        (qp, solver)
+    }
+
+    /// After a move of the held set, the stages above the last changed one keep their
+    /// factorization: refactorizing the others alone ends as a whole factorization does, bit
+    /// for bit; leaving a changed stage out does not.
+    #[test]
+    fn a_move_refactorizes_the_changed_stages_alone() {
+        let (qp, mut part) = qp_and_solver();
+        let mut before = [[false; 2]; 6];
+        before[4][1] = true;
+        before[1][0] = true;
+        assert!(part.factorize(&qp, Newton::Held(&before)));
+        let mut after = before;
+        after[2][1] = true;
+        after[1][0] = false;
+        let mut whole = part.clone();
+        assert!(whole.factorize(&qp, Newton::Held(&after)));
+        let mut short = part.clone();
+        assert!(part.factorize_stages(&qp, Newton::Held(&after), 3));
+        assert!(part.linv == whole.linv && part.wt == whole.wt && part.pn == whole.pn);
+        // Stage 2 changed: refactorizing stages 1 and 0 alone is not the factorization.
+        assert!(short.factorize_stages(&qp, Newton::Held(&after), 2));
+        assert!(short.linv != whole.linv || short.wt != whole.wt);
+    }
 }
