@@ -260,6 +260,35 @@ fn rows_doc(title: &str, rows: &[RowBlock]) -> String {
     s
 }
 
+/// User text from the model (descriptions, units) for a doc comment: `[` and `]` escaped,
+/// so that `[m]` renders as written instead of being read as an intra-doc link. Brackets
+/// inside a code span (`` `p[0]` ``) are left alone: Markdown shows them as they are there,
+/// and would show the backslash too.
+fn doc_text(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    let mut rest = text;
+    while let Some(c) = rest.chars().next() {
+        if c == '`' {
+            // A code span: a run of backticks up to the next run of the same length.
+            let run = rest.len() - rest.trim_start_matches('`').len();
+            let (ticks, after) = rest.split_at(run);
+            let close = after
+                .match_indices(ticks)
+                .find(|&(i, _)| !after[..i].ends_with('`') && !after[i + run..].starts_with('`'));
+            let end = close.map_or(run, |(i, _)| run + i + run);
+            out.push_str(&rest[..end]);
+            rest = &rest[end..];
+            continue;
+        }
+        if c == '[' || c == ']' {
+            out.push('\\');
+        }
+        out.push(c);
+        rest = &rest[c.len_utf8()..];
+    }
+    out
+}
+
 fn doc_lines(text: &str) -> TokenStream {
     let lines = text.lines().map(|l| {
         let l = format!(" {l}");
@@ -554,7 +583,7 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
             "Entries of {what} `{}` {}{}.",
             v.name,
             if v.doc.is_empty() { "" } else { ": " },
-            v.doc
+            doc_text(&v.doc)
         ));
         quote!(#d pub const #c: core::ops::Range<usize> = #a..#b;)
     };
@@ -593,7 +622,7 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
         let doc_txt = if v.doc.is_empty() {
             String::new()
         } else {
-            format!(" ({})", v.doc)
+            format!(" ({})", doc_text(&v.doc))
         };
         if v.per_stage {
             let d = doc_lines(&format!(
@@ -663,7 +692,7 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
             if v.doc.is_empty() {
                 String::new()
             } else {
-                format!(" ({})", v.doc)
+                format!(" ({})", doc_text(&v.doc))
             }
         ));
         if v.scalar {
@@ -1628,4 +1657,92 @@ fn item_attrs(item: &mut syn::Item) -> Option<&mut Vec<syn::Attribute>> {
         Item::Use(i) => &mut i.attrs,
         _ => return None,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::doc_text;
+    use crate::{Options, generate, generate_module};
+    use mpc_dsl::Graph;
+    use mpc_dsl::lang::{ParseOptions, parse};
+
+    /// Units and descriptions with brackets, on a state, a control and both kinds of
+    /// parameter (the range constants, the setters and the getter copy them into docs).
+    const BRACKETS: &str = r#"
+model bracket_docs;
+state x[2]  unit "m"   doc "position [m] along `e[0]`";
+control u   unit "N"   doc "force [N]";
+param a global doc "gain [1/s]" default 1;
+param r[2] stage unit "m" doc "reference" default [0, 0];
+dynamics ode rk4(1) { der(x) = [x[1], a * u]; }
+horizon N = 5, dt = 0.1;
+cost {
+    Q = diag(1, 1) ref r;
+    R = diag(1);
+}
+"#;
+
+    #[test]
+    fn doc_text_escapes_brackets_outside_code_spans() {
+        assert_eq!(doc_text("position [m]"), r"position \[m\]");
+        assert_eq!(doc_text("[m/s^2] and [rad]"), r"\[m/s^2\] and \[rad\]");
+        assert_eq!(doc_text("entry `p[0]` [m]"), r"entry `p[0]` \[m\]");
+        assert_eq!(doc_text("``a`[0]`` [s]"), r"``a`[0]`` \[s\]");
+        // An unclosed backtick is literal text: the brackets after it are escaped.
+        assert_eq!(doc_text("a ` b [s]"), r"a ` b \[s\]");
+        assert_eq!(doc_text("no brackets"), "no brackets");
+    }
+
+    /// The doc comment lines (`///`, `//!`) of emitted code that contain `needle`.
+    fn doc_lines_with<'a>(code: &'a str, needle: &str) -> Vec<&'a str> {
+        code.lines()
+            .map(str::trim_start)
+            .filter(|l| (l.starts_with("///") || l.starts_with("//!")) && l.contains(needle))
+            .collect()
+    }
+
+    /// A model's units and descriptions reach the generated docs with `[` and `]` escaped:
+    /// rustdoc would read `[m]` as an intra-doc link to an item `m` (and warn that there is
+    /// none). Both the crate (`generate`) and the module for `include!` (`generate_module`).
+    #[test]
+    fn brackets_in_model_docs_are_escaped_in_the_emitted_docs() {
+        let g = Graph::new();
+        let parsed = match parse(&g, BRACKETS, &ParseOptions::default()) {
+            Ok(p) => p,
+            Err(d) => panic!("{}", d.render("test.mpc", BRACKETS)),
+        };
+        let opts = Options::new();
+        let krate = generate(&parsed.ocp, &opts).unwrap();
+        let lib = krate
+            .files
+            .iter()
+            .find(|(p, _)| p.ends_with("src/lib.rs"))
+            .map(|(_, c)| c.clone())
+            .expect("a src/lib.rs");
+        let module = generate_module(&parsed.ocp, "bracket_docs", &opts).unwrap();
+        for (what, code) in [("crate", lib.as_str()), ("module", module.as_str())] {
+            for (escaped, count) in [
+                (r"position \[m\] along `e[0]` \[m\]", 1),
+                (r"(force \[N\] \[N\])", 1),
+                (r"(gain \[1/s\])", 1),
+                (r"(reference \[m\])", 2),
+            ] {
+                assert_eq!(
+                    doc_lines_with(code, escaped).len(),
+                    count,
+                    "{what}: `{escaped}` in {count} doc lines"
+                );
+            }
+            for raw in ["[m]", "[N]", "[1/s]"] {
+                let unescaped: Vec<_> = doc_lines_with(code, raw)
+                    .into_iter()
+                    .filter(|l| l.replace(r"\[", "").contains(raw))
+                    .collect();
+                assert!(
+                    unescaped.is_empty(),
+                    "{what}: unescaped {raw}: {unescaped:?}"
+                );
+            }
+        }
+    }
 }
