@@ -50,8 +50,11 @@ enum Command {
     Sitl(SitlArgs),
 }
 
+// The doc comments below are `--help` text (clap prints them verbatim): units are written
+// `[m]`, not escaped for rustdoc, which would read them as intra-doc links.
 /// Where the mission flies, for `mpcc sim` and `mpcc fly`.
 #[derive(clap::Args)]
+#[allow(rustdoc::broken_intra_doc_links)]
 struct MissionShape {
     /// Rally point, where the flip happens and which is held after it, relative to home (ENU)
     /// [m] (default 4,0,2).
@@ -65,7 +68,10 @@ struct MissionShape {
     flip_rate: Option<f64>,
 }
 
+// The doc comments below are `--help` text (clap prints them verbatim): units are written
+// `[m]`, not escaped for rustdoc, which would read them as intra-doc links.
 #[derive(clap::Args)]
+#[allow(rustdoc::broken_intra_doc_links)]
 struct FlyArgs {
     /// The link to PX4: udpin:HOST:PORT (listen, answer the sender; PX4 SITL's offboard link
     /// is udpin:127.0.0.1:14540), udpout:HOST:PORT, or serial:DEVICE:BAUD.
@@ -103,7 +109,10 @@ struct FlyArgs {
     json: bool,
 }
 
+// The doc comments below are `--help` text (clap prints them verbatim): units are written
+// `[m]`, not escaped for rustdoc, which would read them as intra-doc links.
 #[derive(clap::Args)]
+#[allow(rustdoc::broken_intra_doc_links)]
 struct SitlArgs {
     /// Where to send (as PX4 SITL: udpout:127.0.0.1:14540), or udpin:HOST:PORT.
     #[arg(long, default_value = "udpout:127.0.0.1:14540")]
@@ -126,7 +135,9 @@ struct SitlArgs {
     json: bool,
 }
 
+// The doc comments below are `--help` text (clap prints them verbatim): `<N>` is not HTML.
 #[derive(clap::Args)]
+#[allow(rustdoc::invalid_html_tags)]
 struct BenchArgs {
     /// Benchmark problem.
     #[arg(long, default_value = "qrbench")]
@@ -165,7 +176,10 @@ struct BenchArgs {
     json: bool,
 }
 
+// The doc comments below are `--help` text (clap prints them verbatim): units are written
+// `[m]`, not escaped for rustdoc, which would read them as intra-doc links.
 #[derive(clap::Args)]
+#[allow(rustdoc::broken_intra_doc_links)]
 struct SimArgs {
     /// Mission: flip (the paper's), hover, step, or flip-throw (throw the tethered probe to
     /// a target --range metres away during a pitch-over, recover, return, land).

@@ -1,6 +1,6 @@
 //! # mpc-codegen: from an [`Ocp`] to a generated solver crate
 //!
-//! [`lower`] turns a validated problem into straight-line functions (dynamics with RK4
+//! [`lower`](fn@lower) turns a validated problem into straight-line functions (dynamics with RK4
 //! forward sensitivities, least-squares residuals, constraints, weights, all with their
 //! Jacobians and common subexpressions computed once); [`generate`] emits them as a
 //! self-contained `#![no_std]` crate on `mpc-runtime`: the functions, an `impl Model`, a typed
@@ -136,7 +136,7 @@ fn allows() -> proc_macro2::TokenStream {
 /// `include/<name>.h`.
 ///
 /// # Errors
-/// Those of [`lower`], and [`CodegenError::Option`] for a crate name that is not a valid
+/// Those of [`lower`](fn@lower), and [`CodegenError::Option`] for a crate name that is not a valid
 /// identifier.
 pub fn generate(ocp: &Ocp<'_>, opts: &Options) -> Result<GeneratedCrate, CodegenError> {
     let l = lower(ocp)?;

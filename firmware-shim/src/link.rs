@@ -57,7 +57,7 @@ pub struct LinkConfig {
     pub odometry_timeout: f64,
     /// This many consecutive solver failures: return mode.
     pub max_solver_failures: u32,
-    /// ODOMETRY rate asked of PX4 at the start [Hz] (0: do not ask).
+    /// ODOMETRY rate asked of PX4 at the start \[Hz\] (0: do not ask).
     pub odometry_rate: f32,
 }
 

@@ -110,11 +110,11 @@ pub enum Command {
     Disarm,
     /// MAV_CMD_DO_SET_MODE, param1 = 1 (custom mode enabled), param2/param3 = main/sub mode.
     SetMode(Px4Mode),
-    /// MAV_CMD_SET_MESSAGE_INTERVAL: message id, rate [Hz].
+    /// MAV_CMD_SET_MESSAGE_INTERVAL: message id, rate \[Hz\].
     MessageInterval {
         /// The message id (e.g. 331 for ODOMETRY).
         message_id: u32,
-        /// The rate [Hz] (> 0).
+        /// The rate \[Hz\] (> 0).
         hz: f32,
     },
 }
@@ -217,9 +217,9 @@ pub fn command_long(cmd: Command, confirmation: u8) -> MavMessage {
 /// The vehicle's state as PX4 reports it, in PX4's frames.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct OdometryNed {
-    /// Vehicle time [us] (clock the controller from it, not from wall time).
+    /// Vehicle time \[us\] (clock the controller from it, not from wall time).
     pub time_us: u64,
-    /// Position, NED [m].
+    /// Position, NED \[m\].
     pub position: [f32; 3],
     /// Velocity, NED [m/s] (converted from FRD when PX4 sends it in the body frame).
     pub velocity: [f32; 3],
@@ -244,16 +244,16 @@ pub enum Inbound {
     Odometry(OdometryNed),
     /// LOCAL_POSITION_NED: time [ms since boot], position and velocity NED.
     LocalPosition {
-        /// Time since boot [ms].
+        /// Time since boot \[ms\].
         time_boot_ms: u32,
-        /// Position NED [m].
+        /// Position NED \[m\].
         position: [f32; 3],
         /// Velocity NED [m/s].
         velocity: [f32; 3],
     },
     /// ATTITUDE_QUATERNION: time [ms since boot], attitude NED -> FRD, body rates FRD.
     Attitude {
-        /// Time since boot [ms].
+        /// Time since boot \[ms\].
         time_boot_ms: u32,
         /// [w, x, y, z].
         q: [f32; 4],

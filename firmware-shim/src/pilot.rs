@@ -52,11 +52,11 @@ use crate::messages::{self, Inbound, Px4Mode};
 use crate::setpoint::{Px4Setpoint, RateLimits, SetpointError, ThrustMap, make_setpoint};
 use crate::transport::Link;
 
-/// LOCAL_POSITION_NED and ATTITUDE_QUATERNION closer than this make one state [us].
+/// LOCAL_POSITION_NED and ATTITUDE_QUATERNION closer than this make one state \[us\].
 pub const PAIR_WINDOW_US: u64 = 25_000;
-/// ODOMETRY is preferred: the pairs are used only when none came for this long [us].
+/// ODOMETRY is preferred: the pairs are used only when none came for this long \[us\].
 pub const ODOMETRY_PREFERENCE_US: u64 = 500_000;
-/// The estimate is brought forward by its age, at most this much [s].
+/// The estimate is brought forward by its age, at most this much \[s\].
 pub const MAX_PREDICTION_S: f64 = 0.25;
 /// Height above the start point and speed below which the vehicle counts as on the ground.
 pub const GROUND_HEIGHT_M: f64 = 0.05;
@@ -76,7 +76,7 @@ pub struct PilotConfig {
     pub thrust_map: Option<ThrustMap>,
     /// Body-rate bounds of the setpoints.
     pub limits: RateLimits,
-    /// SET_ATTITUDE_TARGET rate [Hz], 25..=250.
+    /// SET_ATTITUDE_TARGET rate \[Hz\], 25..=250.
     pub setpoint_rate: f64,
     /// Bring the estimate forward by its age before each solve.
     pub predict: bool,
@@ -132,9 +132,9 @@ pub enum PilotError {
 /// The vehicle's state in the models' frames (ENU world, FLU body).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct State {
-    /// Vehicle time [s].
+    /// Vehicle time \[s\].
     pub t: f64,
-    /// Position [m].
+    /// Position \[m\].
     pub p: Vector3<f64>,
     /// Velocity [m/s].
     pub v: Vector3<f64>,
@@ -292,7 +292,7 @@ impl VehicleClock {
     }
 }
 
-/// Time constant of PX4's rate loop and rotors as the prediction models them [s]: the body
+/// Time constant of PX4's rate loop and rotors as the prediction models them \[s\]: the body
 /// rates and the thrust follow the setpoint as first-order lags.
 pub const RESPONSE_TIME_CONSTANT: f64 = 0.03;
 
@@ -331,32 +331,32 @@ pub fn predict(s: &State, commands: &[(f64, InnerCommand)], until: f64) -> State
     out
 }
 
-/// What happened, with the vehicle time [s] it happened at.
+/// What happened, with the vehicle time \[s\] it happened at.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Event {
-    /// Vehicle time [s].
+    /// Vehicle time \[s\].
     pub t: f64,
     /// What, in words.
     pub what: String,
 }
 
-/// Mean, median, 99th percentile and maximum [ms].
+/// Mean, median, 99th percentile and maximum \[ms\].
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
 pub struct PeriodStats {
     /// Number of intervals.
     pub count: usize,
-    /// Mean [ms].
+    /// Mean \[ms\].
     pub mean_ms: f64,
-    /// Median [ms].
+    /// Median \[ms\].
     pub median_ms: f64,
-    /// 99th percentile (nearest rank) [ms].
+    /// 99th percentile (nearest rank) \[ms\].
     pub p99_ms: f64,
-    /// Maximum [ms].
+    /// Maximum \[ms\].
     pub max_ms: f64,
 }
 
 impl PeriodStats {
-    /// Statistics of `values` [s].
+    /// Statistics of `values` \[s\].
     pub fn of(values: &[f64]) -> Self {
         let mut v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
         if v.is_empty() {
@@ -384,7 +384,7 @@ pub struct FlightReport {
     pub summary: Option<TrialSummary>,
     /// How the session ended, in words.
     pub session: String,
-    /// Failsafes engaged, with their vehicle time [s].
+    /// Failsafes engaged, with their vehicle time \[s\].
     pub failsafes: Vec<(String, f64)>,
     /// States accepted.
     pub states: u64,
@@ -400,7 +400,7 @@ pub struct FlightReport {
     pub setpoint_period: PeriodStats,
     /// Wall-clock period of the solver steps.
     pub solver_period: PeriodStats,
-    /// Solver time per step [us]: mean, p99, max.
+    /// Solver time per step \[us\]: mean, p99, max.
     pub solver_us: report::TimeStats,
     /// Solver steps that fell back to the previous plan.
     pub fallbacks: u64,
@@ -550,7 +550,7 @@ impl Pilot {
         self.events.push(Event { t, what });
     }
 
-    /// Handles a message received at wall time `wall` [s].
+    /// Handles a message received at wall time `wall` \[s\].
     pub fn on_message(&mut self, header: &MavHeader, msg: &MavMessage, wall: f64) {
         let inbound = messages::classify(header, msg);
         if let Inbound::Param { name, value } = inbound
@@ -667,7 +667,7 @@ impl Pilot {
         });
     }
 
-    /// One step of the loop at wall time `wall` [s]: the messages to send now.
+    /// One step of the loop at wall time `wall` \[s\]: the messages to send now.
     pub fn poll(&mut self, wall: f64) -> Vec<MavMessage> {
         let mut out = Vec::new();
         if self.map.is_none() && self.failure.is_none() && self.clock.started() {

@@ -19,7 +19,7 @@
 //! * The mode shows in the 1 Hz HEARTBEAT (`custom_mode`), so a client sees it late.
 //! * MAV_CMD_SET_MESSAGE_INTERVAL (511) sets the rate of the messages the simulated vehicle
 //!   streams ([`STREAMED_MESSAGES`]) as PX4's mavlink module does (`set_message_interval`):
-//!   param1 the message id (rounded), param2 the interval [us] (negative: stop, 0: the
+//!   param1 the message id (rounded), param2 the interval \[us\] (negative: stop, 0: the
 //!   default rate, positive: that interval); the vehicle reads the result with
 //!   [`Commander::message_interval`]. PX4 answers MAV_RESULT_FAILED for HEARTBEAT, for a
 //!   message it cannot stream, and for a non-zero param3, param4 or param7 (unsupported
@@ -37,9 +37,9 @@ use crate::messages::Px4Mode;
 /// Timing of the simulated PX4.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CommanderConfig {
-    /// A stream silent this long ends OFFBOARD [s].
+    /// A stream silent this long ends OFFBOARD \[s\].
     pub offboard_loss_timeout: f64,
-    /// HEARTBEAT period [s].
+    /// HEARTBEAT period \[s\].
     pub heartbeat_period: f64,
 }
 

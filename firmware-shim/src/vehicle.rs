@@ -54,16 +54,16 @@ pub struct VehicleConfig {
     pub estimator: EstimatorConfig,
     /// Noise seed.
     pub seed: u64,
-    /// Where it starts, on the ground (ENU) [m]; also home for AUTO.RTL.
+    /// Where it starts, on the ground (ENU) \[m\]; also home for AUTO.RTL.
     pub home: Vector3<f64>,
-    /// Default ODOMETRY period [s]: PX4 streams it at 30 Hz on the onboard link until asked
+    /// Default ODOMETRY period \[s\]: PX4 streams it at 30 Hz on the onboard link until asked
     /// otherwise (up to ~100 Hz seen). Not positive or not finite: not streamed by default.
     pub odometry_period: f64,
-    /// Default LOCAL_POSITION_NED period [s] (PX4: 30 Hz); not positive or not finite: off.
+    /// Default LOCAL_POSITION_NED period \[s\] (PX4: 30 Hz); not positive or not finite: off.
     pub local_position_period: f64,
-    /// Default ATTITUDE_QUATERNION period [s] (PX4: 50 Hz); not positive or not finite: off.
+    /// Default ATTITUDE_QUATERNION period \[s\] (PX4: 50 Hz); not positive or not finite: off.
     pub attitude_quaternion_period: f64,
-    /// Default EXTENDED_SYS_STATE period [s] (1 Hz); not positive or not finite: off.
+    /// Default EXTENDED_SYS_STATE period \[s\] (1 Hz); not positive or not finite: off.
     pub sys_state_period: f64,
     /// AUTO.LAND descent speed [m/s].
     pub land_speed: f64,
@@ -222,22 +222,22 @@ fn tilt_free_heading(q: &UnitQuaternion<f64>) -> f64 {
 /// A touchdown of the true vehicle.
 #[derive(Clone, Debug, PartialEq)]
 pub struct TouchdownRecord {
-    /// Simulated time [s].
+    /// Simulated time \[s\].
     pub time: f64,
     /// Downward speed at impact [m/s].
     pub vertical_speed: f64,
     /// Horizontal speed at impact [m/s].
     pub horizontal_speed: f64,
-    /// Tilt at impact [rad].
+    /// Tilt at impact \[rad\].
     pub tilt: f64,
-    /// Where (ENU) [m].
+    /// Where (ENU) \[m\].
     pub position: Vector3<f64>,
 }
 
 /// A mode change of the simulated PX4.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ModeChange {
-    /// Simulated time [s].
+    /// Simulated time \[s\].
     pub time: f64,
     /// The mode before.
     pub from: Px4Mode,
@@ -264,18 +264,18 @@ impl core::fmt::Display for ModeChange {
 pub struct FlightRecord {
     /// Why the plant crashed, if it did (the plant is frozen from then on).
     pub crashed: Option<String>,
-    /// When it crashed [s].
+    /// When it crashed \[s\].
     pub crash_time: Option<f64>,
-    /// Time spent airborne [s].
+    /// Time spent airborne \[s\].
     pub airborne_time: f64,
-    /// When it first left the ground [s].
+    /// When it first left the ground \[s\].
     pub first_liftoff: Option<f64>,
-    /// Highest true height (ENU z, the ground is z = 0) while airborne [m].
+    /// Highest true height (ENU z, the ground is z = 0) while airborne \[m\].
     pub max_height: Option<f64>,
-    /// Lowest true height while airborne after the first lift-off [m] (close to 0 after a
+    /// Lowest true height while airborne after the first lift-off \[m\] (close to 0 after a
     /// landing: it includes the final approach).
     pub min_height: Option<f64>,
-    /// Integral of the true body rate about body y while in OFFBOARD [rad], in the models'
+    /// Integral of the true body rate about body y while in OFFBOARD \[rad\], in the models'
     /// FLU body frame: positive tips the nose down, so a back flip (nose up, positive FRD
     /// pitch rate) counts negative.
     pub offboard_pitch_rotation: f64,
@@ -285,13 +285,13 @@ pub struct FlightRecord {
     pub touchdowns: Vec<TouchdownRecord>,
     /// The mode changes, in order (the vehicle starts in POSCTL).
     pub mode_changes: Vec<ModeChange>,
-    /// When it was armed [s].
+    /// When it was armed \[s\].
     pub armed_at: Vec<f64>,
-    /// When it was disarmed [s] (by command or by PX4 after an AUTO landing).
+    /// When it was disarmed \[s\] (by command or by PX4 after an AUTO landing).
     pub disarmed_at: Vec<f64>,
-    /// The true position now (ENU) [m].
+    /// The true position now (ENU) \[m\].
     pub final_position: Vector3<f64>,
-    /// Simulated time now [s].
+    /// Simulated time now \[s\].
     pub time: f64,
 }
 
@@ -387,7 +387,7 @@ struct Px4Target {
     mode: Px4Mode,
     /// Hold point, or home (at the return height) for AUTO.RTL.
     point: Vector3<f64>,
-    /// Heading to hold (ENU yaw) [rad].
+    /// Heading to hold (ENU yaw) \[rad\].
     yaw: f64,
     /// Descending (AUTO.LAND; AUTO.RTL once over home).
     descending: bool,
@@ -473,7 +473,7 @@ impl SimVehicle {
         self.map
     }
 
-    /// Simulated time [s].
+    /// Simulated time \[s\].
     pub fn time(&self) -> f64 {
         self.t
     }

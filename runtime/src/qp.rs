@@ -553,7 +553,8 @@ pub struct QpSolver<
     hu: [Vect<T, NU>; N],
     hxn: Vect<T, NX>,
     /// Riccati: `P_{k+1}`, `p_{k+1}`, `L^-1` for the Cholesky factor `L` of `R~ = R + B'PB`,
-    /// `W' = S~'L^-T` for `S~ = S + B'PA`, and the feedforward term `y` (see [`lq_solve`]).
+    /// `W' = S~'L^-T` for `S~ = S + B'PA`, and the feedforward term `y` (see
+    /// [`lq_solve`](Self::lq_solve)).
     pn: [Mat<T, NX, NX>; NR],
     pvn: [Vect<T, NX>; NR],
     linv: [Mat<T, NU, NU>; NR],
@@ -1618,8 +1619,8 @@ impl<
     }
 
     /// Riccati solve of the linear-quadratic problem with gradients `gxt`, `gut`, `gnt`, and
-    /// dynamics residuals `rbt`, using the factorization of the last [`factorize`] call;
-    /// writes `dx`, `du`, `dxn` and `pi_new`.
+    /// dynamics residuals `rbt`, using the factorization of the last
+    /// [`factorize`](Self::factorize) call; writes `dx`, `du`, `dxn` and `pi_new`.
     fn lq_solve<const NH: usize>(
         &mut self,
         qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>,

@@ -40,7 +40,7 @@ pub struct InnerCommand {
 /// Statistics of one outer-loop step.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct OuterStats {
-    /// Wall-clock time of the solver (set references, prepare, feedback) [us].
+    /// Wall-clock time of the solver (set references, prepare, feedback) \[us\].
     pub solver_us: f64,
     /// QP iterations.
     pub qp_iterations: u32,
@@ -70,7 +70,7 @@ impl ControllerKind {
 /// An outer loop: a solver step every [`period`](Controller::period), an inner command at
 /// every rate-loop step.
 pub trait Controller {
-    /// Outer-loop period [s].
+    /// Outer-loop period \[s\].
     fn period(&self) -> f64;
     /// One solver step at time `t` from the estimate; the reference comes from `mission`.
     fn outer(&mut self, t: f64, est: &Estimate, mission: &Mission) -> OuterStats;
@@ -83,9 +83,9 @@ pub trait Controller {
 /// flight with a clear thrust. This is the thrust mapping's integral action.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MassEstimator {
-    /// Current estimate [kg].
+    /// Current estimate \[kg\].
     pub mass: f64,
-    /// Filter time constant [s].
+    /// Filter time constant \[s\].
     pub tau: f64,
     nominal: f64,
 }
@@ -100,7 +100,7 @@ impl MassEstimator {
         }
     }
 
-    /// One update: `thrust` the commanded collective [N], `specific_z` the accelerometer's
+    /// One update: `thrust` the commanded collective \[N\], `specific_z` the accelerometer's
     /// body-z specific force [m/s^2], `tilt_cos` body z . world z, `rate` the body-rate norm.
     pub fn update(&mut self, thrust: f64, specific_z: f64, tilt_cos: f64, rate: f64, dt: f64) {
         if specific_z > 3.0 && thrust > 0.0 && tilt_cos > 0.8 && rate < 1.5 && thrust.is_finite() {
@@ -172,7 +172,7 @@ impl PointMassWeights {
 /// The paper's architecture.
 pub struct PaperController {
     solver: Box<paper_pointmass::Solver>,
-    /// Attitude time constant tau [s].
+    /// Attitude time constant tau \[s\].
     pub tau: f64,
     /// Collective-thrust and rate limits of the inner command.
     pub max_rate: f64,

@@ -20,22 +20,22 @@ use crate::plant::QuadState;
 /// Noise, latency and dropouts of the estimate.
 #[derive(Clone, Debug, PartialEq)]
 pub struct EstimatorConfig {
-    /// Latency of the pose source [s] (the paper's motion capture: a few ms).
+    /// Latency of the pose source \[s\] (the paper's motion capture: a few ms).
     pub latency: f64,
-    /// Standard deviation of the position noise, per axis [m].
+    /// Standard deviation of the position noise, per axis \[m\].
     pub pos_noise: f64,
     /// Standard deviation of the velocity noise, per axis [m/s].
     pub vel_noise: f64,
-    /// Standard deviation of the attitude noise, per axis (small rotation vector) [rad].
+    /// Standard deviation of the attitude noise, per axis (small rotation vector) \[rad\].
     pub att_noise: f64,
     /// Standard deviation of the gyro noise, per axis [rad/s].
     pub gyro_noise: f64,
-    /// Windows `[start, end)` [s] in which the pose is lost.
+    /// Windows `[start, end)` \[s\] in which the pose is lost.
     pub dropouts: Vec<(f64, f64)>,
     /// Dead-reckoning drift while the pose is lost: random-walk intensity of the velocity
     /// error [m/s per sqrt(s)] (the position error is its integral).
     pub drift: f64,
-    /// Correlation time of the pose noise [s]: the flight controller's filter smooths the
+    /// Correlation time of the pose noise \[s\]: the flight controller's filter smooths the
     /// motion-capture samples, so the error is coloured (first-order Gauss-Markov with the
     /// standard deviations above), not white at the simulation rate. 0: white.
     pub noise_correlation: f64,
@@ -86,9 +86,9 @@ impl Default for EstimatorConfig {
 /// What the controllers see at one instant.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Estimate {
-    /// Time of the estimate [s].
+    /// Time of the estimate \[s\].
     pub t: f64,
-    /// Position [m].
+    /// Position \[m\].
     pub p: Vector3<f64>,
     /// Velocity [m/s].
     pub v: Vector3<f64>,

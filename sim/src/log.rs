@@ -11,7 +11,7 @@ use crate::plant::QuadState;
 /// NaN (an empty CSV cell) on rows where the outer loop did not run.
 #[derive(Clone, Copy, Debug, Default, Serialize)]
 pub struct Sample {
-    /// Simulation time [s].
+    /// Simulation time \[s\].
     pub t: f64,
     /// Mission phase (index into [`crate::mission::Phase::ALL`]).
     pub phase: u8,
@@ -19,17 +19,17 @@ pub struct Sample {
     pub failsafe: bool,
     /// Whether the pose estimate was available at this step.
     pub pose_valid: bool,
-    /// True position x, y, z [m].
+    /// True position x, y, z \[m\].
     pub x: f64,
-    /// True position y [m].
+    /// True position y \[m\].
     pub y: f64,
-    /// True position z [m].
+    /// True position z \[m\].
     pub z: f64,
-    /// Position reference x [m].
+    /// Position reference x \[m\].
     pub x_ref: f64,
-    /// Position reference y [m].
+    /// Position reference y \[m\].
     pub y_ref: f64,
-    /// Position reference z [m].
+    /// Position reference z \[m\].
     pub z_ref: f64,
     /// True velocity x [m/s].
     pub vx: f64,
@@ -45,7 +45,7 @@ pub struct Sample {
     pub qy: f64,
     /// True attitude quaternion z.
     pub qz: f64,
-    /// Accumulated pitch rotation since the flip began [rad] (integral of the body y rate).
+    /// Accumulated pitch rotation since the flip began \[rad\] (integral of the body y rate).
     pub pitch_turned: f64,
     /// True body rate x (roll) [rad/s].
     pub wx: f64,
@@ -61,19 +61,19 @@ pub struct Sample {
     pub wz_cmd: f64,
     /// Mission's body-rate reference y (5*pi in the flip, else 0) [rad/s].
     pub wy_ref: f64,
-    /// Commanded collective thrust [N].
+    /// Commanded collective thrust \[N\].
     pub thrust_cmd: f64,
-    /// Actual collective thrust of the four rotors [N].
+    /// Actual collective thrust of the four rotors \[N\].
     pub thrust: f64,
-    /// Rotor 1 thrust [N] (numbering: see [`crate::plant`]).
+    /// Rotor 1 thrust \[N\] (numbering: see [`crate::plant`]).
     pub f1: f64,
-    /// Rotor 2 thrust [N].
+    /// Rotor 2 thrust \[N\].
     pub f2: f64,
-    /// Rotor 3 thrust [N].
+    /// Rotor 3 thrust \[N\].
     pub f3: f64,
-    /// Rotor 4 thrust [N].
+    /// Rotor 4 thrust \[N\].
     pub f4: f64,
-    /// Outer-loop solver time of this step [us] (NaN when the outer loop did not run).
+    /// Outer-loop solver time of this step \[us\] (NaN when the outer loop did not run).
     pub solver_us: f64,
     /// QP iterations of this step (NaN when the outer loop did not run).
     pub qp_iterations: f64,
@@ -82,7 +82,7 @@ pub struct Sample {
 }
 
 impl Sample {
-    /// A row at time `t` with the true state `s`, the rotor thrusts `rotors` [N] and the
+    /// A row at time `t` with the true state `s`, the rotor thrusts `rotors` \[N\] and the
     /// outer loop's `stats` if it ran at this step; the mission and command columns are zero
     /// (set them with struct update syntax).
     pub fn at(t: f64, s: &QuadState, rotors: [f64; 4], stats: Option<OuterStats>) -> Self {

@@ -113,7 +113,7 @@ pub struct MissionConfig {
     pub takeoff_point: Vector3<f64>,
     /// Rally point, where the flip happens and which is held after it (the paper: (4, 0, 2)).
     pub rally_point: Vector3<f64>,
-    /// Heading [rad] (0: body x along world x).
+    /// Heading \[rad\] (0: body x along world x).
     pub yaw: f64,
     /// Duration of the take-off leg.
     pub takeoff_time: f64,
@@ -121,7 +121,7 @@ pub struct MissionConfig {
     pub rally_time: f64,
     /// Minimum settling time at the end of a leg before the next phase.
     pub settle_time: f64,
-    /// Position error below which the vehicle counts as settled [m].
+    /// Position error below which the vehicle counts as settled \[m\].
     pub settle_tol: f64,
     /// Longest wait for settling; the mission goes on after it (the summary judges).
     pub settle_timeout: f64,
@@ -131,7 +131,7 @@ pub struct MissionConfig {
     pub ascend_speed: f64,
     /// Pitch-rate reference of the flip [rad/s] (the paper: 5*pi).
     pub flip_rate: f64,
-    /// Rotation of the flip [rad] (2*pi: one full turn).
+    /// Rotation of the flip \[rad\] (2*pi: one full turn).
     pub flip_angle: f64,
     /// Mass-normalized collective thrust during the flip [m/s^2].
     pub flip_thrust: f64,
@@ -141,19 +141,19 @@ pub struct MissionConfig {
     pub hold_time: f64,
     /// Duration of the hold of the `hover` mission.
     pub hover_time: f64,
-    /// Position step of the `step` mission [m].
+    /// Position step of the `step` mission \[m\].
     pub step: Vector3<f64>,
     /// Duration of the return leg.
     pub return_time: f64,
     /// Duration of the smooth part of the landing, down to `land_flare_height`.
     pub land_time: f64,
-    /// Height where the smooth descent hands over to the constant final descent [m].
+    /// Height where the smooth descent hands over to the constant final descent \[m\].
     pub land_flare_height: f64,
     /// Final descent speed until touchdown [m/s].
     pub land_speed: f64,
-    /// Pose loss longer than this triggers return mode [s].
+    /// Pose loss longer than this triggers return mode \[s\].
     pub pose_timeout: f64,
-    /// Return mode: climb by this much above the current height first [m].
+    /// Return mode: climb by this much above the current height first \[m\].
     pub failsafe_climb: f64,
     /// Return mode: duration of the climb (and level-out).
     pub failsafe_climb_time: f64,
@@ -200,7 +200,7 @@ impl MissionConfig {
         }
     }
 
-    /// Duration of the flip rotation [s].
+    /// Duration of the flip rotation \[s\].
     pub fn flip_time(&self) -> f64 {
         if self.flip_rate.abs() > 0.0 {
             (self.flip_angle / self.flip_rate).abs()
@@ -221,13 +221,13 @@ impl Default for MissionConfig {
 pub struct RefPoint {
     /// Phase this instant belongs to.
     pub phase: Phase,
-    /// Position [m].
+    /// Position \[m\].
     pub p: Vector3<f64>,
     /// Velocity [m/s].
     pub v: Vector3<f64>,
     /// Acceleration [m/s^2].
     pub a: Vector3<f64>,
-    /// Heading [rad].
+    /// Heading \[rad\].
     pub yaw: f64,
     /// Attitude reference where the mission prescribes one (the flip); otherwise the
     /// attitude follows from `a` and `yaw`.
@@ -292,7 +292,7 @@ pub enum Segment {
         start: [Vector3<f64>; 3],
         /// End position, velocity, acceleration.
         end: [Vector3<f64>; 3],
-        /// Duration [s].
+        /// Duration \[s\].
         duration: f64,
     },
     /// The flip rotation from position `p0` and velocity `v0`.
@@ -305,7 +305,7 @@ pub enum Segment {
         rate: f64,
         /// Mass-normalized thrust [m/s^2].
         thrust: f64,
-        /// Heading [rad].
+        /// Heading \[rad\].
         yaw: f64,
     },
     /// Constant-speed vertical descent from `p0`.
@@ -467,9 +467,9 @@ struct PlanSeg {
 /// What the mission needs to know of the vehicle at each step.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MissionInput {
-    /// Time [s].
+    /// Time \[s\].
     pub t: f64,
-    /// Estimated position [m].
+    /// Estimated position \[m\].
     pub p: Vector3<f64>,
     /// Estimated velocity [m/s].
     pub v: Vector3<f64>,
@@ -482,7 +482,7 @@ pub struct MissionInput {
 /// A phase change, for the log and the summary.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Transition {
-    /// Time [s].
+    /// Time \[s\].
     pub t: f64,
     /// The phase entered.
     pub phase: Phase,
@@ -546,12 +546,12 @@ impl Mission {
         self.phase
     }
 
-    /// When the current phase began [s].
+    /// When the current phase began \[s\].
     pub fn phase_start(&self) -> f64 {
         self.phase_start
     }
 
-    /// When return mode engaged, if it did [s].
+    /// When return mode engaged, if it did \[s\].
     pub fn failsafe_since(&self) -> Option<f64> {
         self.failsafe
     }

@@ -18,9 +18,9 @@ use plotters::style::{FontStyle, register_font};
 
 use crate::log::Sample;
 
-/// Width of every figure [px].
+/// Width of every figure \[px\].
 pub const WIDTH: u32 = 1200;
-/// Height of every figure [px].
+/// Height of every figure \[px\].
 pub const HEIGHT: u32 = 900;
 
 /// The embedded font (DejaVu Sans Mono, Bitstream Vera licence).
@@ -31,12 +31,12 @@ const FONT: &str = "sans-serif";
 const MONO_ADVANCE_EM: f64 = 0.602;
 /// Lines and point clouds longer than this are decimated (min/max per bucket) before drawing.
 const MAX_LINE_POINTS: usize = 4000;
-/// Font size of legend entries [px].
+/// Font size of legend entries \[px\].
 const LEGEND_FONT_PX: u32 = 14;
 /// Maximum number of labelled ticks on the time and value axes.
 const X_TICKS: usize = 12;
 const Y_TICKS: usize = 6;
-/// Legend margin and sample-line area [px] (as passed to plotters).
+/// Legend margin and sample-line area \[px\] (as passed to plotters).
 const LEGEND_MARGIN: i32 = 8;
 const LEGEND_SAMPLE: i32 = 30;
 
@@ -769,9 +769,9 @@ fn distinct_pixels<DB: DrawingBackend>(
 /// flip-and-throw trial.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct ThrowView {
-    /// The probe's path, (horizontal distance along the throw, height) [m].
+    /// The probe's path, (horizontal distance along the throw, height) \[m\].
     pub probe: Vec<(f64, f64)>,
-    /// The vehicle's path, same axes [m].
+    /// The vehicle's path, same axes \[m\].
     pub vehicle: Vec<(f64, f64)>,
     /// Where the probe was released.
     pub release: Option<(f64, f64)>,
@@ -779,7 +779,7 @@ pub struct ThrowView {
     pub landing: Option<f64>,
     /// The target on the ground.
     pub target: f64,
-    /// The landing tolerance around the target [m] (drawn as a band).
+    /// The landing tolerance around the target \[m\] (drawn as a band).
     pub tolerance: f64,
 }
 

@@ -21,19 +21,19 @@ use crate::log::Sample;
 use crate::mission::{MissionKind, Phase};
 use crate::run::{Outcome, TrialResult};
 
-/// Distance to the rally point that counts as recovered [m].
+/// Distance to the rally point that counts as recovered \[m\].
 pub const RECOVERY_TOL_M: f64 = 0.10;
-/// Longest acceptable recovery after the flip [s].
+/// Longest acceptable recovery after the flip \[s\].
 pub const RECOVERY_LIMIT_S: f64 = 3.0;
-/// Lowest acceptable height from the ascent to the end of the hold [m].
+/// Lowest acceptable height from the ascent to the end of the hold \[m\].
 pub const MIN_FLIGHT_ALTITUDE_M: f64 = 1.0;
 /// Fastest acceptable touchdown [m/s].
 pub const MAX_TOUCHDOWN_SPEED: f64 = 0.5;
 /// Fraction of the flip's rate reference that must be reached.
 pub const MIN_RATE_FRACTION: f64 = 0.9;
-/// Return mode must engage this soon after the pose is lost [s].
+/// Return mode must engage this soon after the pose is lost \[s\].
 pub const FAILSAFE_DELAY_LIMIT_S: f64 = 0.2;
-/// Touchdown this close to the landing point counts as landed there [m] (0.5 m in return
+/// Touchdown this close to the landing point counts as landed there \[m\] (0.5 m in return
 /// mode, which flies on dead reckoning).
 pub const LANDING_TOL_M: f64 = 0.25;
 
@@ -74,28 +74,28 @@ impl TimeStats {
 pub struct PhaseSummary {
     /// Phase name.
     pub phase: String,
-    /// Start [s].
+    /// Start \[s\].
     pub start_s: f64,
-    /// Duration [s].
+    /// Duration \[s\].
     pub duration_s: f64,
-    /// Largest position error [m].
+    /// Largest position error \[m\].
     pub max_tracking_error_m: f64,
-    /// RMS position error [m].
+    /// RMS position error \[m\].
     pub rms_tracking_error_m: f64,
     /// RMS position error relative to the reference path length (at least 1 m) [%].
     pub tracking_error_pct: f64,
     /// Mean pitch-rate error relative to the reference rate [%] (phases with a rate
     /// reference only).
     pub rate_tracking_error_pct: Option<f64>,
-    /// Recovery time after the flip [s] (the recover phase; `None` if never recovered).
+    /// Recovery time after the flip \[s\] (the recover phase; `None` if never recovered).
     pub recovery_time_s: Option<f64>,
-    /// Lowest height [m].
+    /// Lowest height \[m\].
     pub min_altitude_m: f64,
-    /// Height lost in the phase [m].
+    /// Height lost in the phase \[m\].
     pub altitude_loss_m: f64,
     /// Largest |pitch rate| [rad/s].
     pub peak_pitch_rate_rad_s: f64,
-    /// Solver time per outer step [us].
+    /// Solver time per outer step \[us\].
     pub solver_time_us: TimeStats,
     /// Outer steps that fell back to the previous plan.
     pub fallbacks: u32,
@@ -114,33 +114,33 @@ pub struct TrialSummary {
     pub outcome: String,
     /// Per phase, in the order flown.
     pub phases: Vec<PhaseSummary>,
-    /// Total pitch rotation of the flip (largest accumulated) [rad].
+    /// Total pitch rotation of the flip (largest accumulated) \[rad\].
     pub flip_rotation_rad: Option<f64>,
     /// Largest |pitch rate| in the flip [rad/s].
     pub peak_pitch_rate_rad_s: Option<f64>,
-    /// Recovery time after the flip [s].
+    /// Recovery time after the flip \[s\].
     pub recovery_time_s: Option<f64>,
-    /// Lowest height from the ascent to the end of the hold [m].
+    /// Lowest height from the ascent to the end of the hold \[m\].
     pub min_flight_altitude_m: Option<f64>,
     /// Vertical speed at touchdown [m/s].
     pub touchdown_speed_m_s: Option<f64>,
-    /// Distance of the touchdown from the landing point [m].
+    /// Distance of the touchdown from the landing point \[m\].
     pub landing_error_m: Option<f64>,
-    /// Delay from pose loss to return mode [s].
+    /// Delay from pose loss to return mode \[s\].
     pub failsafe_delay_s: Option<f64>,
-    /// Solver time over the whole trial [us].
+    /// Solver time over the whole trial \[us\].
     pub solver_time_us: TimeStats,
     /// QP iterations per outer step, mean.
     pub qp_iterations_mean: f64,
     /// Fallbacks over the whole trial.
     pub fallbacks: u32,
-    /// True mass [kg] (Monte Carlo draws differ).
+    /// True mass \[kg\] (Monte Carlo draws differ).
     pub mass_kg: f64,
     /// True inertia diagonal [kg m^2].
     pub inertia: [f64; 3],
-    /// True rotor time constant [s].
+    /// True rotor time constant \[s\].
     pub rotor_tau_s: f64,
-    /// Pose latency [s].
+    /// Pose latency \[s\].
     pub latency_s: f64,
     /// Peak gust speed [m/s].
     pub gust_m_s: f64,
@@ -409,21 +409,21 @@ pub fn summarize(res: &TrialResult) -> TrialSummary {
 pub struct PhaseAggregate {
     /// Phase name.
     pub phase: String,
-    /// Largest position error over the trials [m].
+    /// Largest position error over the trials \[m\].
     pub max_tracking_error_m: f64,
     /// Largest relative RMS error [%].
     pub tracking_error_pct: f64,
     /// Largest relative pitch-rate error [%].
     pub rate_tracking_error_pct: Option<f64>,
-    /// Longest recovery [s] (`None`: some trial never recovered, or no recovery phase).
+    /// Longest recovery \[s\] (`None`: some trial never recovered, or no recovery phase).
     pub recovery_time_s: Option<f64>,
-    /// Lowest height [m].
+    /// Lowest height \[m\].
     pub min_altitude_m: f64,
-    /// Largest altitude loss [m].
+    /// Largest altitude loss \[m\].
     pub altitude_loss_m: f64,
     /// Smallest peak pitch rate over the trials [rad/s] (the weakest flip).
     pub peak_pitch_rate_rad_s: f64,
-    /// Solver time per step over all trials [us].
+    /// Solver time per step over all trials \[us\].
     pub solver_time_us: TimeStats,
     /// Fallbacks over all trials.
     pub fallbacks: u32,
@@ -446,7 +446,7 @@ pub struct RunSummary {
     pub success_rate: f64,
     /// Per phase, worst over the trials.
     pub phases: Vec<PhaseAggregate>,
-    /// Solver time per step over all trials [us].
+    /// Solver time per step over all trials \[us\].
     pub solver_time_us: TimeStats,
     /// Fallbacks over all trials.
     pub fallbacks: u32,

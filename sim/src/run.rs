@@ -14,9 +14,9 @@ use crate::rate_loop::{RateController, RateGains};
 /// A wind gust: the air velocity rises and falls as 1 - cos over `duration`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Gust {
-    /// Start [s].
+    /// Start \[s\].
     pub start: f64,
-    /// Duration [s].
+    /// Duration \[s\].
     pub duration: f64,
     /// Peak air velocity [m/s] (world).
     pub peak: Vector3<f64>,
@@ -52,9 +52,9 @@ pub struct SimConfig {
     pub gust: Option<Gust>,
     /// Seed of the noise.
     pub seed: u64,
-    /// Plant and rate-loop step [s] (1 kHz).
+    /// Plant and rate-loop step \[s\] (1 kHz).
     pub dt: f64,
-    /// The trial ends at this time at the latest [s].
+    /// The trial ends at this time at the latest \[s\].
     pub t_max: f64,
 }
 
@@ -124,11 +124,11 @@ pub enum Outcome {
 /// A touchdown.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Touchdown {
-    /// Time [s].
+    /// Time \[s\].
     pub t: f64,
     /// Vertical speed at contact [m/s].
     pub vertical_speed: f64,
-    /// Where [m].
+    /// Where \[m\].
     pub p: Vector3<f64>,
 }
 
@@ -145,9 +145,9 @@ pub struct TrialResult {
     pub outcome: Outcome,
     /// The last touchdown (after having flown).
     pub touchdown: Option<Touchdown>,
-    /// When the pose was first lost, if it was [s].
+    /// When the pose was first lost, if it was \[s\].
     pub pose_lost_at: Option<f64>,
-    /// When return mode engaged, if it did [s].
+    /// When return mode engaged, if it did \[s\].
     pub failsafe_at: Option<f64>,
 }
 

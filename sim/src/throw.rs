@@ -63,16 +63,16 @@ use crate::rate_loop::{RateController, RateGains};
 use crate::release::{self, ReleaseBounds, ReleaseError, ReleasePlan};
 use crate::report::TimeStats;
 
-/// Link length of the `quadrotor_probe` model [m] (a constant of the model file).
+/// Link length of the `quadrotor_probe` model \[m\] (a constant of the model file).
 pub const MODEL_LINK_LENGTH: f64 = 0.5;
 
-/// Recovery tolerance after release [m] (issue: back within 0.15 m of the hold point).
+/// Recovery tolerance after release \[m\] (issue: back within 0.15 m of the hold point).
 pub const THROW_RECOVERY_TOL_M: f64 = 0.15;
-/// Longest acceptable recovery after release [s].
+/// Longest acceptable recovery after release \[s\].
 pub const THROW_RECOVERY_MAX_S: f64 = 3.0;
-/// Lowest acceptable height of the vehicle from the throw to the end of the hold [m].
+/// Lowest acceptable height of the vehicle from the throw to the end of the hold \[m\].
 pub const THROW_MIN_ALTITUDE_M: f64 = 1.0;
-/// Largest acceptable distance of the probe's landing point from the target [m].
+/// Largest acceptable distance of the probe's landing point from the target \[m\].
 pub const LANDING_TOL_M: f64 = 0.5;
 
 /// Tracking weights (diagonal of Q) of the swing-aware controller before release.
@@ -100,11 +100,11 @@ const MAX_ROUNDS: u32 = 12;
 /// Everything the flip-and-throw mission needs. Positions in m (world ENU), times in s.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ThrowConfig {
-    /// Wanted range: horizontal distance from the probe's start to its landing point [m].
+    /// Wanted range: horizontal distance from the probe's start to its landing point \[m\].
     pub range: f64,
     /// Bounds on the release speed and angle.
     pub bounds: ReleaseBounds,
-    /// Heading of the throw [rad] (0: towards +x).
+    /// Heading of the throw \[rad\] (0: towards +x).
     pub yaw: f64,
     /// Where the vehicle lands at the end.
     pub home: Vector3<f64>,
@@ -143,7 +143,7 @@ pub struct ThrowConfig {
     pub land_speed: f64,
     /// The probe.
     pub probe: ProbeParams,
-    /// Link-angle encoder noise, per angle [rad] (white).
+    /// Link-angle encoder noise, per angle \[rad\] (white).
     pub angle_noise: f64,
     /// Link-rate noise, per angle [rad/s] (white).
     pub rate_noise: f64,
@@ -191,11 +191,11 @@ pub enum ThrowError {
          {height:.2} m high): {source}"
     )]
     Release {
-        /// The range asked for [m].
+        /// The range asked for \[m\].
         range: f64,
-        /// The distance from the release point to the target [m].
+        /// The distance from the release point to the target \[m\].
         along: f64,
-        /// The release height [m].
+        /// The release height \[m\].
         height: f64,
         /// The planner's error.
         source: ReleaseError,
@@ -209,11 +209,11 @@ pub enum ThrowError {
     Unachievable {
         /// Probe speed at the end of the plan [m/s].
         reached: f64,
-        /// Its angle above the horizontal [deg].
+        /// Its angle above the horizontal \[deg\].
         angle_deg: f64,
         /// Planned release speed [m/s].
         wanted: f64,
-        /// Planned release angle [deg].
+        /// Planned release angle \[deg\].
         wanted_deg: f64,
         /// The solver's status or the size of the miss.
         why: String,
@@ -291,7 +291,7 @@ impl ThrowConfig {
         Vector3::new(s.x, s.y, 0.0) + self.direction() * self.range
     }
 
-    /// When the throw begins [s] (a multiple of the controller period).
+    /// When the throw begins \[s\] (a multiple of the controller period).
     pub fn throw_start(&self) -> f64 {
         let t = self.ascend_time + self.settle_time;
         (t / pm::DT).ceil() * pm::DT
@@ -331,7 +331,7 @@ pub struct ThrowPlan {
 }
 
 impl ThrowPlan {
-    /// Planned release time after the throw's start [s].
+    /// Planned release time after the throw's start \[s\].
     pub fn release_time(&self) -> f64 {
         self.release_stage as f64 * pm::DT
     }
@@ -536,9 +536,9 @@ pub struct ThrowSimConfig {
     pub estimator: EstimatorConfig,
     /// Seed of the noise.
     pub seed: u64,
-    /// Plant and rate-loop step [s].
+    /// Plant and rate-loop step \[s\].
     pub dt: f64,
-    /// Longest trial [s].
+    /// Longest trial \[s\].
     pub t_max: f64,
 }
 
@@ -561,19 +561,19 @@ impl ThrowSimConfig {
 /// What happened at release.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct ReleaseRecord {
-    /// Time [s].
+    /// Time \[s\].
     pub t: f64,
     /// Whether the trigger fired (false: released at the end of the window).
     pub triggered: bool,
     /// True probe speed [m/s].
     pub speed_m_s: f64,
-    /// True angle of the probe velocity above the horizontal [rad].
+    /// True angle of the probe velocity above the horizontal \[rad\].
     pub angle_rad: f64,
-    /// True probe height [m].
+    /// True probe height \[m\].
     pub height_m: f64,
     /// True vehicle velocity [m/s].
     pub vehicle_velocity: [f64; 3],
-    /// The landing point predicted from the estimate at the trigger [m].
+    /// The landing point predicted from the estimate at the trigger \[m\].
     pub predicted_landing: [f64; 3],
 }
 
@@ -1166,47 +1166,47 @@ pub struct ThrowSummary {
     pub failures: Vec<String>,
     /// How it ended.
     pub outcome: String,
-    /// Wanted range [m].
+    /// Wanted range \[m\].
     pub range_m: f64,
-    /// Target x, y [m].
+    /// Target x, y \[m\].
     pub target_m: [f64; 2],
     /// Planned release speed and angle.
     pub planned_speed_m_s: f64,
-    /// Planned release angle [rad].
+    /// Planned release angle \[rad\].
     pub planned_angle_rad: f64,
     /// Release speed of the probe (true) [m/s].
     pub release_speed_m_s: Option<f64>,
-    /// Release angle above the horizontal (true) [rad].
+    /// Release angle above the horizontal (true) \[rad\].
     pub release_angle_rad: Option<f64>,
-    /// Release height (true) [m].
+    /// Release height (true) \[m\].
     pub release_height_m: Option<f64>,
-    /// Release time [s].
+    /// Release time \[s\].
     pub release_time_s: Option<f64>,
     /// Whether the trigger fired (false: released at the end of the window).
     pub release_triggered: bool,
-    /// Probe landing x [m].
+    /// Probe landing x \[m\].
     pub probe_landing_x_m: Option<f64>,
-    /// Probe landing y [m].
+    /// Probe landing y \[m\].
     pub probe_landing_y_m: Option<f64>,
-    /// Distance of the landing point from the target [m].
+    /// Distance of the landing point from the target \[m\].
     pub probe_landing_error_m: Option<f64>,
-    /// Achieved range from the probe's start [m].
+    /// Achieved range from the probe's start \[m\].
     pub achieved_range_m: Option<f64>,
     /// Hold point after release.
     pub hold_point_m: [f64; 3],
-    /// Time from release until within 0.15 m of the hold point for good [s].
+    /// Time from release until within 0.15 m of the hold point for good \[s\].
     pub recovery_time_s: Option<f64>,
-    /// Lowest vehicle height from the throw's start to the end of the hold [m].
+    /// Lowest vehicle height from the throw's start to the end of the hold \[m\].
     pub min_altitude_m: f64,
     /// Largest pitch rate [rad/s] in the throw and recovery.
     pub peak_pitch_rate_rad_s: f64,
-    /// Largest tilt (body z from world z) during the throw and recovery [rad].
+    /// Largest tilt (body z from world z) during the throw and recovery \[rad\].
     pub max_tilt_rad: f64,
     /// Solver fallbacks over the trial (and from the throw to the end of the hold).
     pub fallbacks: u32,
     /// Fallbacks from the throw's start to the end of the hold.
     pub fallbacks_throw: u32,
-    /// Solver time [us].
+    /// Solver time \[us\].
     pub solver_time_us: TimeStats,
     /// QP iterations per step, mean.
     pub qp_iterations_mean: f64,
@@ -1351,7 +1351,7 @@ pub struct LandingErrors {
 pub struct ThrowRunSummary {
     /// Always `"flip-throw"`.
     pub mission: String,
-    /// Wanted range [m].
+    /// Wanted range \[m\].
     pub range_m: f64,
     /// Whether every trial met every criterion.
     pub success: bool,
@@ -1363,25 +1363,25 @@ pub struct ThrowRunSummary {
     pub success_rate: f64,
     /// Planned release speed [m/s] (the same for every trial: the plan is deterministic).
     pub planned_speed_m_s: f64,
-    /// Planned release angle [rad].
+    /// Planned release angle \[rad\].
     pub planned_angle_rad: f64,
-    /// Landing x of the probe per trial [m].
+    /// Landing x of the probe per trial \[m\].
     pub probe_landing_x_m: Vec<Option<f64>>,
-    /// Landing y of the probe per trial [m].
+    /// Landing y of the probe per trial \[m\].
     pub probe_landing_y_m: Vec<Option<f64>>,
-    /// Distance of each landing from the target [m].
+    /// Distance of each landing from the target \[m\].
     pub probe_landing_error_m: LandingErrors,
     /// Release speed per trial [m/s].
     pub release_speed_m_s: Vec<Option<f64>>,
-    /// Release angle per trial [rad].
+    /// Release angle per trial \[rad\].
     pub release_angle_rad: Vec<Option<f64>>,
-    /// Longest recovery [s] (`None` if a trial did not recover).
+    /// Longest recovery \[s\] (`None` if a trial did not recover).
     pub recovery_time_s_worst: Option<f64>,
-    /// Lowest vehicle height from the throw to the end of the hold over all trials [m].
+    /// Lowest vehicle height from the throw to the end of the hold over all trials \[m\].
     pub min_altitude_m: f64,
     /// Solver fallbacks over all trials.
     pub fallbacks: u32,
-    /// Solver time over all trials: the mean of the means, the largest p99 and max [us].
+    /// Solver time over all trials: the mean of the means, the largest p99 and max \[us\].
     pub solver_time_us: TimeStats,
     /// Every trial.
     pub trial_summaries: Vec<ThrowSummary>,

@@ -170,7 +170,7 @@ impl<
     }
 
     /// Block Cholesky factorization `L L' = H + Sigma` into `ld` and below the diagonal of
-    /// `tri`; see [`block_cholesky`].
+    /// `tri`; see [`block_cholesky`](Self::block_cholesky).
     pub(super) fn condensed_factorize(&mut self) -> bool {
         for j in 0..NC.min(N) {
             self.ld[j] = self.tri[j][j] + Mat::from_diagonal(&self.ru[j].sigma(None));
@@ -212,7 +212,8 @@ impl<
         true
     }
 
-    /// `v <- (L L')^-1 v` with the factor of the last [`condensed_factorize`].
+    /// `v <- (L L')^-1 v` with the factor of the last
+    /// [`condensed_factorize`](Self::condensed_factorize).
     fn condensed_solve(&self, v: &mut [Vect<T, NU>; N]) {
         let n = NC.min(N);
         for i in 0..n {

@@ -1,6 +1,6 @@
-//! Active-set polish of a solution of the Riccati recursion ([`QpSettings::polish`]), for
-//! QPs with state bounds and general constraints (a condensed QP has its own, on the
-//! control bounds alone: see `condense.rs`).
+//! Active-set polish of a solution of the Riccati recursion
+//! ([`QpSettings::polish`](super::QpSettings::polish)), for QPs with state bounds and general
+//! constraints (a condensed QP has its own, on the control bounds alone: see `condense.rs`).
 //!
 //! An interior point stops with every active row about `mu / lam` off its bound; in `f32`,
 //! whose complementarity tolerance is `1e-4`, a weakly active row can be off by `1e-2`. The
