@@ -1463,36 +1463,24 @@ impl<
         mode: Newton<'_, T, NBX, NU, NG, NGN, N>,
         stages: usize,
     ) -> bool {
-        if stages < N {
-            return self.factorize_from(qp, mode, stages);
-        }
-        let t = &qp.terminal;
         // P_N = Q_N + Sigma_xN + C_N' Sigma_gN C_N, built in place in pn[N - 1].
-        let Some(last) = self.pn.last_mut() else {
-            return true;
-        };
-        *last = t.q;
-        add_diagonal(
-            last,
-            &self
-                .rxn
-                .scatter(&weights(&self.rxn, None, mode.weight(|a| &a.xn))),
-        );
-        if NGN > 0 {
-            let sg = weights(&self.rgn, Some(&self.sgn), mode.weight(|a| &a.gn));
-            mul_sparse_add_into(last, &scaled_transpose(&sg, &t.c), &t.c);
+        if stages >= N
+            && let Some(last) = self.pn.last_mut()
+        {
+            let t = &qp.terminal;
+            *last = t.q;
+            add_diagonal(
+                last,
+                &self
+                    .rxn
+                    .scatter(&weights(&self.rxn, None, mode.weight(|a| &a.xn))),
+            );
+            if NGN > 0 {
+                let sg = weights(&self.rgn, Some(&self.sgn), mode.weight(|a| &a.gn));
+                mul_sparse_add_into(last, &scaled_transpose(&sg, &t.c), &t.c);
+            }
+            symmetrize(last);
         }
-        symmetrize(last);
-        self.factorize_from(qp, mode, N)
-    }
-
-    /// Stages `stages - 1` down to 0 of [`factorize_stages`](Self::factorize_stages).
-    fn factorize_from<const NH: usize>(
-        &mut self,
-        qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>,
-        mode: Newton<'_, T, NBX, NU, NG, NGN, N>,
-        stages: usize,
-    ) -> bool {
         // P_{k+1} is read in pn[k] by stage k, which builds P_k in pn[k - 1].
         for k in (0..stages.min(N)).rev() {
             let s = &qp.stages[k];
