@@ -70,6 +70,33 @@ pub trait Model<
         self.dynamics(x, u, p, &mut a, &mut b)
     }
 
+    /// The model implements [`dynamics_hessian`](Self::dynamics_hessian): the full SQP
+    /// ([`Rti::solve_sqp`](crate::Rti::solve_sqp)) then adds the dynamics' curvature to the
+    /// Gauss-Newton Hessian (exact-Hessian steps, in a solver with one Hessian per stage,
+    /// `NH = N`). The generator sets it with its `exact_hessian` option.
+    const EXACT_HESSIAN: bool = false;
+
+    /// The dynamics' part of the Lagrangian Hessian: the Hessian of the scalar
+    /// `pi' F(x, u, p)` over `(x, u)`, written as `hxx` (`NX x NX`), `hux` (`NU x NX`) and
+    /// `huu` (`NU x NU`). `pi` are the multipliers of `x_{k+1} = F(x_k, u_k, p_k)` in the
+    /// QP's sign convention (the Lagrangian adds `pi' (F - x_{k+1})`). Only called when
+    /// [`EXACT_HESSIAN`](Self::EXACT_HESSIAN) holds; the default writes zeros.
+    #[allow(clippy::too_many_arguments)]
+    fn dynamics_hessian(
+        &self,
+        _x: &SVector<T, NX>,
+        _u: &SVector<T, NU>,
+        _p: &SVector<T, NP>,
+        _pi: &SVector<T, NX>,
+        hxx: &mut SMatrix<T, NX, NX>,
+        hux: &mut SMatrix<T, NU, NX>,
+        huu: &mut SMatrix<T, NU, NU>,
+    ) {
+        hxx.fill(T::ZERO);
+        hux.fill(T::ZERO);
+        huu.fill(T::ZERO);
+    }
+
     /// Stage residual `y(x, u, p)` with its Jacobians.
     fn residual(
         &self,

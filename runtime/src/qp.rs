@@ -821,6 +821,15 @@ impl<
         self.last_alpha
     }
 
+    /// Moves the dynamics multipliers of the last solution one stage forward (the last
+    /// stage's kept), as [`Rti`](crate::Rti) shifts its trajectory: the full SQP's
+    /// exact Hessian evaluates them at the shifted stages.
+    pub(crate) fn shift_multipliers(&mut self) {
+        for k in 1..N {
+            self.sol.pi[k - 1] = self.sol.pi[k];
+        }
+    }
+
     /// The last solution (primal and dynamics multipliers).
     pub fn solution(&self) -> &QpSolution<T, NX, NU, N> {
         &self.sol

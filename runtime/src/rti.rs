@@ -41,6 +41,13 @@ pub struct RtiSettings<T> {
     /// solved again to the QP tolerances, and so are the rest of that solve's. Default
     /// [`Real::SQP_LOOSE_QPS`]: on in f64, off in f32.
     pub sqp_loose_qps: bool,
+    /// [`Rti::solve_sqp`] adds the dynamics' curvature `sum_i pi_i d2F_i/d(x, u)2` to the
+    /// Gauss-Newton Hessian of each stage (Newton steps on the Lagrangian, with the last
+    /// QP's multipliers `pi`), where the model provides it ([`Model::EXACT_HESSIAN`]) and
+    /// the QP keeps a Hessian per stage (`NH = N`). An iteration whose QP then fails, or
+    /// whose step does not decrease the merit function, is taken again with the
+    /// Gauss-Newton Hessian. Default on; without the model's Hessian it does nothing.
+    pub sqp_exact_hessian: bool,
 }
 
 impl<T: Real> RtiSettings<T> {
@@ -66,6 +73,7 @@ impl<T: Real> RtiSettings<T> {
         sqp_max_iter: 50,
         sqp_tol: T::SQP_TOL,
         sqp_loose_qps: T::SQP_LOOSE_QPS,
+        sqp_exact_hessian: true,
     };
 
     /// Every setting zero (no QP iteration, no SQP iteration): [`Rti::unconfigured`]'s.
@@ -75,6 +83,7 @@ impl<T: Real> RtiSettings<T> {
         sqp_max_iter: 0,
         sqp_tol: T::ZERO,
         sqp_loose_qps: false,
+        sqp_exact_hessian: false,
     };
 }
 
@@ -607,6 +616,9 @@ impl<
         }
         self.x[N - 1] = self.xn;
         self.solver.shift_active_set();
+        if M::EXACT_HESSIAN {
+            self.solver.shift_multipliers();
+        }
     }
 
     /// Preparation phase: linearizes dynamics, cost and constraints of every stage around the
@@ -776,11 +788,12 @@ impl<
         self.xn = self.xnt;
     }
 
-    /// Merit function `cost + penalty + nu * (sum |dynamics defect|_1)` at the current
-    /// trajectory, where `penalty` is the soft rows' slack cost at their violation
-    /// `v = max(lg - h, 0)`, `max(h - ug, 0)`: `l1 v + 1/2 l2 v^2` per side (the QP's objective
-    /// at its optimal slacks; hard rows do not enter).
-    fn merit(&self, nu: T) -> T {
+    /// The parts of the merit function `cost + penalty + nu * (sum |dynamics defect|_1)` at
+    /// the current trajectory, `(cost + penalty, sum |dynamics defect|_1)`, where `penalty` is
+    /// the soft rows' slack cost at their violation `v = max(lg - h, 0)`, `max(h - ug, 0)`:
+    /// `l1 v + 1/2 l2 v^2` per side (the QP's objective at its optimal slacks; hard rows do
+    /// not enter).
+    fn merit_parts(&self) -> (T, T) {
         let mut cost = T::ZERO;
         let mut defect = T::ZERO;
         let mut jx = SMatrix::<T, NY, NX>::zeros();
@@ -807,12 +820,73 @@ impl<
             let h = self.model.terminal_constraints(&self.xn, &self.pn, &mut cx);
             cost += soft_penalty(&h, &self.lgn, &self.ugn, &self.l1n, &self.l2n);
         }
-        cost + nu * defect
+        (cost, defect)
     }
 
-    /// Full SQP from the current trajectory with `x_0` fixed to `x0`: Gauss-Newton steps with a
-    /// line search on an exact L1 merit function (`cost + soft-constraint penalties +
-    /// nu |dynamics defects|_1`, `nu` twice the largest dynamics multiplier), until the largest entry of the QP step is below
+    /// One QP of the full SQP ([`solve_sqp`](Self::solve_sqp)): with `loose`, by the
+    /// interior point to `loose_settings` and the polish to `tight` (and `loose` turns off
+    /// for the rest of the solve if the polish is refused), else to `tight`.
+    fn solve_sqp_qp(
+        &mut self,
+        loose: &mut bool,
+        loose_settings: &QpSettings<T>,
+        tight: &QpSettings<T>,
+    ) -> QpInfo<T> {
+        let mut last = None;
+        if *loose {
+            self.solver.settings = *loose_settings;
+            let info = self.solver.solve(&self.qp);
+            // Polished to `tight`'s tolerances (the Riccati recursion's polish checks its
+            // result against them).
+            self.solver.settings = *tight;
+            *loose = info.status == QpStatus::Solved && self.solver.polish(&self.qp);
+            last = Some(info);
+        }
+        match last {
+            Some(info) if *loose => info,
+            _ => {
+                self.solver.settings = *tight;
+                self.solver.solve(&self.qp)
+            }
+        }
+    }
+
+    /// Adds the dynamics' part of the Lagrangian Hessian at the last QP's multipliers,
+    /// `sum_i pi_i d2F_i/d(x, u)2` ([`Model::dynamics_hessian`]), to every stage's Hessian of
+    /// the QP (`NH = N`). Returns whether it did: not for zero multipliers (no QP solved
+    /// yet, where the Hessians stay Gauss-Newton's) nor non-finite ones.
+    fn add_dynamics_curvature(&mut self) -> bool {
+        let pi = &self.solver.solution().pi;
+        if NH != N
+            || !pi.iter().all(all_finite)
+            || pi.iter().all(|p| p.iter().all(|&v| v == T::ZERO))
+        {
+            return false;
+        }
+        let mut hxx = SMatrix::<T, NX, NX>::zeros();
+        let mut hux = SMatrix::<T, NU, NX>::zeros();
+        let mut huu = SMatrix::<T, NU, NU>::zeros();
+        for (k, pik) in pi.iter().enumerate() {
+            let (Some(x), Some(u), Some(p)) = (self.x.get(k), self.u.get(k), self.p.get(k)) else {
+                break;
+            };
+            self.model
+                .dynamics_hessian(x, u, p, pik, &mut hxx, &mut hux, &mut huu);
+            let h = self.qp.h_mut(k);
+            h.q += hxx;
+            h.s += hux;
+            h.r += huu;
+        }
+        // The next linearization writes the Gauss-Newton terms again.
+        self.gn_current = false;
+        true
+    }
+
+    /// Full SQP from the current trajectory with `x_0` fixed to `x0`: Gauss-Newton steps, or
+    /// exact-Hessian ones where the model provides the dynamics' Hessian
+    /// ([`RtiSettings::sqp_exact_hessian`]), with a line search on an exact L1 merit function
+    /// (`cost + soft-constraint penalties + nu |dynamics defects|_1`, `nu` twice the largest
+    /// dynamics multiplier), until the largest entry of the QP step is below
     /// `settings.sqp_tol` or `settings.sqp_max_iter` iterations. For offline planning and
     /// tests. The trajectory is left at the last accepted iterate. Each QP is solved to at
     /// least the QP solver's default tolerances: with `settings.sqp_loose_qps` (on in f64) by
@@ -854,21 +928,25 @@ impl<
         loose_settings.tol_ineq = lt.max(tight.tol_ineq);
         loose_settings.tol_comp = lt.max(tight.tol_comp);
         loose_settings.polish = false;
+        let exact = M::EXACT_HESSIAN && NH == N && self.settings.sqp_exact_hessian;
+        let mut gauss_newton_next = false;
+        // The merit's parts (cost, defects) at the current iterate, where known.
+        let mut here: Option<(T, T)> = None;
         for it in 0..self.settings.sqp_max_iter {
             self.linearize();
             let x_lin0 = self.x.first().copied().unwrap_or(*x0);
             self.qp.x0 = x0 - x_lin0;
-            if loose {
-                self.solver.settings = loose_settings;
-                last = self.solver.solve(&self.qp);
-                // Polished to `tight`'s tolerances (the Riccati recursion's polish checks
-                // its result against them).
-                self.solver.settings = tight;
-                loose = last.status == QpStatus::Solved && self.solver.polish(&self.qp);
-            }
-            if !loose {
-                self.solver.settings = tight;
-                last = self.solver.solve(&self.qp);
+            let mut curved = exact && !gauss_newton_next && self.add_dynamics_curvature();
+            gauss_newton_next = false;
+            let loose_before = loose;
+            last = self.solve_sqp_qp(&mut loose, &loose_settings, &tight);
+            if curved && (last.status != QpStatus::Solved || !self.step_is_finite()) {
+                // The QP with the curvature is not convex where it must be (or broke down):
+                // this iteration with Gauss-Newton's Hessian, which is.
+                self.linearize();
+                curved = false;
+                loose = loose_before;
+                last = self.solve_sqp_qp(&mut loose, &loose_settings, &tight);
             }
             if last.status != QpStatus::Solved || !self.step_is_finite() {
                 return self.info(RtiStatus::UsedPreviousPlan, last, it + 1);
@@ -884,14 +962,32 @@ impl<
             if let Some(x) = self.x.first_mut() {
                 *x = *x0;
             }
-            let phi0 = self.merit(nu);
+            if step <= self.settings.sqp_tol {
+                // Converged: the step is below the tolerance; taken whole, without a search.
+                self.apply_step(T::ONE);
+                if let Some(x) = self.x.first_mut() {
+                    *x = *x0;
+                }
+                self.plan = self.u;
+                self.plan_age = 0;
+                return self.info(RtiStatus::Ok, last, it + 1);
+            }
+            // The merit's parts at the current iterate: those of the step accepted last (the
+            // pinned first state has not moved since), else evaluated.
+            let parts0 = match here.take() {
+                Some(parts) => parts,
+                None => self.merit_parts(),
+            };
+            let phi0 = parts0.0 + nu * parts0.1;
             self.xt = self.x;
             self.ut = self.u;
             self.xnt = self.xn;
             // Backtracking that keeps halving while the merit keeps improving: it takes the
             // full step where that is best and damps the overshoot of Gauss-Newton steps that
-            // oscillate (a plain Armijo test accepts those and converges slowly).
-            let mut best = (T::ZERO, phi0);
+            // oscillate (a plain Armijo test accepts those and converges slowly). An
+            // exact-Hessian step that decreases the merit is taken whole (Newton's steps do
+            // not oscillate so; near the solution the full step is the best).
+            let mut best = (T::ZERO, phi0, parts0);
             let mut alpha = T::ONE;
             for _ in 0..MAX_HALVINGS {
                 self.restore_trial();
@@ -899,17 +995,31 @@ impl<
                 if let Some(x) = self.x.first_mut() {
                     *x = *x0;
                 }
-                let phi = self.merit(nu);
+                let parts = self.merit_parts();
+                let phi = parts.0 + nu * parts.1;
                 if phi.finite() && phi < best.1 {
-                    best = (alpha, phi);
+                    best = (alpha, phi, parts);
+                    if curved {
+                        break;
+                    }
                 } else if best.0 > T::ZERO {
                     break;
                 }
                 alpha *= T::lit(0.5);
             }
+            if curved && best.0 == T::ZERO {
+                // No decrease along the exact-Hessian step (not a descent direction of the
+                // merit function where the Lagrangian is not convex): stay, and take the next
+                // iteration with Gauss-Newton's Hessian.
+                self.restore_trial();
+                here = Some(parts0);
+                gauss_newton_next = true;
+                continue;
+            }
             // No improvement at all (converged to rounding, or a poor direction): take the
             // smallest step tried, so the iteration cannot stall on a stale linearization.
             let alpha = if best.0 > T::ZERO {
+                here = Some(best.2);
                 best.0
             } else {
                 alpha * T::lit(2.0)
@@ -918,11 +1028,6 @@ impl<
             self.apply_step(alpha);
             if let Some(x) = self.x.first_mut() {
                 *x = *x0;
-            }
-            if step <= self.settings.sqp_tol {
-                self.plan = self.u;
-                self.plan_age = 0;
-                return self.info(RtiStatus::Ok, last, it + 1);
             }
         }
         self.info(RtiStatus::MaxIterations, last, self.settings.sqp_max_iter)

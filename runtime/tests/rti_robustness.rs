@@ -485,6 +485,35 @@ fn prepare_feedback_and_sqp_do_not_allocate() {
     });
     assert_eq!(info.status, RtiStatus::Ok, "{info:?}");
     assert_eq!(n, 0, "allocations with soft constraints");
+    // The full SQP with the exact Hessian (the pendulum's, written by hand).
+    let mut pend = Box::new(Rti::<
+        f64,
+        support::pendulum::Pendulum,
+        2,
+        1,
+        0,
+        3,
+        2,
+        0,
+        0,
+        20,
+    >::new(support::pendulum::Pendulum {
+        dt: 0.1,
+        hessian_scale: 1.0,
+    }));
+    pend.set_weights(&SMatrix::identity(), &SMatrix::identity())
+        .unwrap();
+    pend.set_bounds(
+        &SVector::repeat(f64::NEG_INFINITY),
+        &SVector::repeat(f64::INFINITY),
+        &SVector::from([-2.0]),
+        &SVector::from([2.0]),
+    )
+    .unwrap();
+    let (info, n) = count_allocations(|| pend.solve_sqp(&SVector::from([1.0, 0.0])));
+    assert_eq!(info.status, RtiStatus::Ok, "{info:?}");
+    assert!(info.sqp_iterations >= 2, "{info:?}");
+    assert_eq!(n, 0, "allocations in the exact-Hessian SQP");
     // The counter works: a Vec allocates.
     let (_, n) = count_allocations(|| vec![1u8; 16]);
     assert_eq!(n, 1);

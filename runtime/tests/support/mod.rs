@@ -3,6 +3,7 @@
 
 #![allow(dead_code)]
 
+pub mod pendulum;
 pub mod quadrotor;
 
 use clarabel::algebra::CscMatrix;

@@ -1,0 +1,200 @@
+//! The full SQP with the dynamics' exact Lagrangian Hessian ([`Model::dynamics_hessian`]):
+//! the hand-written pendulum's Hessian against finite differences of its Jacobians, the
+//! same solution as Gauss-Newton's in fewer iterations, Newton's quadratic convergence
+//! against Gauss-Newton's linear one, and the fall back to Gauss-Newton where the Hessian
+//! makes the QP non-convex.
+
+mod support;
+
+use mpc_runtime::{Model, Rti, RtiStatus};
+use nalgebra::{SMatrix, SVector};
+use support::pendulum::Pendulum;
+
+const N: usize = 20;
+type Solver = Rti<f64, Pendulum, 2, 1, 0, 3, 2, 0, 0, N>;
+
+/// Swing-up: from hanging (`theta = 0`) to upright (`pi`) in 2 s with `|u| <= 2` (too weak to
+/// lift the pendulum straight up: it must swing).
+fn swing_up(hessian_scale: f64, exact: bool) -> Box<Solver> {
+    let mut s = Box::new(Solver::new(Pendulum {
+        dt: 0.1,
+        hessian_scale,
+    }));
+    let w = SMatrix::<f64, 3, 3>::from_diagonal(&SVector::from([10.0, 1.0, 0.1]));
+    let wn = SMatrix::<f64, 2, 2>::from_diagonal(&SVector::from([100.0, 10.0]));
+    s.set_weights(&w, &wn).unwrap();
+    for k in 0..N {
+        s.set_reference(k, &SVector::from([std::f64::consts::PI, 0.0, 0.0]))
+            .unwrap();
+    }
+    s.set_terminal_reference(&SVector::from([std::f64::consts::PI, 0.0]))
+        .unwrap();
+    s.set_bounds(
+        &SVector::repeat(f64::NEG_INFINITY),
+        &SVector::repeat(f64::INFINITY),
+        &SVector::from([-2.0]),
+        &SVector::from([2.0]),
+    )
+    .unwrap();
+    s.settings.sqp_exact_hessian = exact;
+    s.settings.sqp_tol = 1e-10;
+    s
+}
+
+const X0: [f64; 2] = [0.0, 0.0];
+
+/// The largest difference of two solvers' trajectories (states and controls).
+fn distance(a: &Solver, b: &Solver) -> f64 {
+    let mut d = (a.state(N).unwrap() - b.state(N).unwrap()).amax();
+    for k in 0..N {
+        d = d
+            .max((a.state(k).unwrap() - b.state(k).unwrap()).amax())
+            .max((a.control(k).unwrap() - b.control(k).unwrap()).amax());
+    }
+    d
+}
+
+#[test]
+fn the_pendulum_hessian_is_the_derivative_of_its_jacobians() {
+    let m = Pendulum {
+        dt: 0.1,
+        hessian_scale: 1.0,
+    };
+    let p = SVector::<f64, 0>::zeros();
+    // `pi' [A B]` at (x, u): the gradient of `pi' F`, differentiated centrally.
+    let grad = |x: &SVector<f64, 2>, u: &SVector<f64, 1>, pi: &SVector<f64, 2>| {
+        let (mut a, mut b) = (SMatrix::zeros(), SMatrix::zeros());
+        let _ = Model::<f64, 2, 1, 0, 3, 2, 0, 0>::dynamics(&m, x, u, &p, &mut a, &mut b);
+        let (gx, gu) = (a.transpose() * pi, b.transpose() * pi);
+        SVector::<f64, 3>::from([gx[0], gx[1], gu[0]])
+    };
+    for (th, om, uu, p1, p2) in [
+        (0.3, -1.0, 0.7, 2.0, -3.0),
+        (2.5, 0.4, -1.5, -0.5, 4.0),
+        (-1.2, 2.0, 1.9, 1.0, 1.0),
+    ] {
+        let (x, u, pi) = (
+            SVector::from([th, om]),
+            SVector::from([uu]),
+            SVector::from([p1, p2]),
+        );
+        let (mut hxx, mut hux, mut huu) = (SMatrix::zeros(), SMatrix::zeros(), SMatrix::zeros());
+        Model::<f64, 2, 1, 0, 3, 2, 0, 0>::dynamics_hessian(
+            &m, &x, &u, &p, &pi, &mut hxx, &mut hux, &mut huu,
+        );
+        let h = 1e-6;
+        for j in 0..3 {
+            let (mut xp, mut up, mut xm, mut um) = (x, u, x, u);
+            if j < 2 {
+                xp[j] += h;
+                xm[j] -= h;
+            } else {
+                up[0] += h;
+                um[0] -= h;
+            }
+            let col = (grad(&xp, &up, &pi) - grad(&xm, &um, &pi)) / (2.0 * h);
+            let ours = if j < 2 {
+                [hxx[(0, j)], hxx[(1, j)], hux[(0, j)]]
+            } else {
+                [hux[(0, 0)], hux[(0, 1)], huu[(0, 0)]]
+            };
+            for (i, (&fd, &o)) in col.iter().zip(&ours).enumerate() {
+                assert!((fd - o).abs() <= 1e-6, "entry ({i}, {j}): {o} vs {fd}");
+            }
+        }
+    }
+}
+
+/// [`swing_up`] solved from [`X0`] (a cold start: 50 and 61 iterations), then ready for
+/// the next state, [`X1`], as in a closed loop.
+fn converged(hessian_scale: f64, exact: bool) -> Box<Solver> {
+    let mut s = swing_up(hessian_scale, exact);
+    s.settings.sqp_max_iter = 300;
+    let info = s.solve_sqp(&SVector::from(X0));
+    assert_eq!(info.status, RtiStatus::Ok, "{info:?}");
+    s
+}
+
+/// The next measured state: off the predicted one.
+const X1: [f64; 2] = [0.1, -0.1];
+
+#[test]
+fn exact_hessian_steps_reach_gauss_newtons_solution_in_fewer_iterations() {
+    let (mut gn, mut ex) = (converged(1.0, false), converged(1.0, true));
+    // The same local solution from the cold start.
+    let d = distance(&gn, &ex);
+    assert!(d <= 1e-7, "the two solutions differ by {d}");
+    // The swing uses the bounds: the solution is not the unconstrained one.
+    let at_bound = (0..N).filter(|&k| ex.control(k).unwrap()[0].abs() >= 2.0 - 1e-9);
+    assert!(at_bound.count() >= 2);
+    let x1 = SVector::from(X1);
+    let gi = gn.solve_sqp(&x1);
+    let ei = ex.solve_sqp(&x1);
+    assert_eq!(gi.status, RtiStatus::Ok, "{gi:?}");
+    assert_eq!(ei.status, RtiStatus::Ok, "{ei:?}");
+    let d = distance(&gn, &ex);
+    assert!(d <= 1e-7, "the two solutions differ by {d}");
+    assert!(
+        2 * ei.sqp_iterations <= gi.sqp_iterations,
+        "exact {} vs Gauss-Newton {} iterations",
+        ei.sqp_iterations,
+        gi.sqp_iterations
+    );
+}
+
+/// Iterations one at a time (`sqp_max_iter = 1`) towards the solution at [`X1`], each one's
+/// distance to `reference`, until below `1e-11` or 60 iterations.
+fn errors(s: &mut Solver, reference: &Solver) -> Vec<f64> {
+    let x1 = SVector::from(X1);
+    s.settings.sqp_max_iter = 1;
+    let mut e = Vec::new();
+    for _ in 0..60 {
+        let info = s.solve_sqp(&x1);
+        assert_ne!(info.status, RtiStatus::UsedPreviousPlan, "{info:?}");
+        e.push(distance(s, reference));
+        if e.last().is_some_and(|&v| v < 1e-11) {
+            break;
+        }
+    }
+    e
+}
+
+#[test]
+fn exact_hessian_converges_quadratically_and_gauss_newton_linearly() {
+    let mut reference = converged(1.0, true);
+    assert_eq!(
+        reference.solve_sqp(&SVector::from(X1)).status,
+        RtiStatus::Ok
+    );
+    let ex = errors(&mut converged(1.0, true), &reference);
+    let gn = errors(&mut converged(1.0, false), &reference);
+    eprintln!("exact {ex:?}\nGauss-Newton {gn:?}");
+    // Iterations from within 1e-2 of the solution to within 1e-10.
+    let tail = |e: &[f64]| {
+        let start = e.iter().position(|&v| v < 1e-2).unwrap_or(e.len());
+        let end = e.iter().position(|&v| v < 1e-10).unwrap_or(e.len());
+        end.saturating_sub(start)
+    };
+    assert!(ex.last().is_some_and(|&v| v < 1e-10), "exact: {ex:?}");
+    assert!(tail(&ex) <= 3, "exact: {ex:?}");
+    // Quadratic: each of those steps at least squares the error (up to a constant).
+    let start = ex.iter().position(|&v| v < 1e-2).unwrap();
+    for w in ex[start..].windows(2) {
+        assert!(w[1] <= 100.0 * w[0] * w[0] || w[1] < 1e-11, "exact: {ex:?}");
+    }
+    // Gauss-Newton's linear rate needs more than twice as many.
+    assert!(
+        tail(&gn) > 2 * tail(&ex),
+        "Gauss-Newton: {gn:?}, exact: {ex:?}"
+    );
+}
+
+#[test]
+fn a_hessian_that_makes_the_qp_non_convex_falls_back_to_gauss_newton() {
+    let gn = converged(1.0, false);
+    // The dynamics' curvature times -1e4: every QP with it has a negative definite block
+    // (the fallback is taken at every iteration after the first).
+    let bad = converged(-1e4, true);
+    let d = distance(&gn, &bad);
+    assert!(d <= 1e-7, "the solutions differ by {d}");
+}
