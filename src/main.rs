@@ -156,6 +156,11 @@ struct BenchArgs {
     /// tolerances; the f32 default). `RtiSettings::sqp_loose_qps`.
     #[arg(long, value_name = "loose|tight")]
     sqp_qps: Option<String>,
+    /// With --sqp, the Hessian of the SQP's QPs: exact (Gauss-Newton's plus the dynamics'
+    /// curvature, from the solvers generated with --exact-hessian: QR-bench A and B in f64,
+    /// the default there) or gauss-newton (the real-time iteration's solvers).
+    #[arg(long, value_name = "exact|gauss-newton")]
+    hessian: Option<String>,
     /// How each QP starts: on (the default) from the last QP's active set, factorized in the
     /// preparation phase (the interior point only where that set and the active-set
     /// iterations after it miss); off: every QP by the interior point.
@@ -260,6 +265,10 @@ struct BuildArgs {
     /// Leave out the C ABI module and header.
     #[arg(long)]
     no_c_abi: bool,
+    /// Emit the dynamics' Lagrangian Hessian: the full SQP (`solve_sqp`) takes exact-Hessian
+    /// steps (the QP keeps one Hessian per stage; the real-time iteration stays Gauss-Newton).
+    #[arg(long)]
+    exact_hessian: bool,
     /// QP iteration limit baked into the solver.
     #[arg(long)]
     qp_max_iter: Option<u32>,
@@ -331,6 +340,7 @@ fn build(a: &BuildArgs) -> ExitCode {
         c_abi: !a.no_c_abi,
         staticlib: a.staticlib,
         runtime,
+        exact_hessian: a.exact_hessian,
     };
     let generated = match mpc_codegen::generate_file(&a.file, a.variant.as_deref(), &opts) {
         Ok(g) => g,

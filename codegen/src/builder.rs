@@ -95,6 +95,13 @@ impl Builder {
         self
     }
 
+    /// Emit the dynamics' Lagrangian Hessian for exact-Hessian full SQP steps (see
+    /// [`Options::exact_hessian`]).
+    pub fn exact_hessian(mut self, on: bool) -> Builder {
+        self.opts.exact_hessian = on;
+        self
+    }
+
     /// Write into `dir` instead of `$OUT_DIR`.
     pub fn out_dir(mut self, dir: impl AsRef<Path>) -> Builder {
         self.out_dir = Some(dir.as_ref().to_path_buf());

@@ -67,6 +67,7 @@ fn operand(o: Operand, f: &Function, s: Scalar, slots: &[usize]) -> TokenStream 
                 Arg::X => quote!(x),
                 Arg::U => quote!(u),
                 Arg::P => quote!(p),
+                Arg::Pi => quote!(pi),
             };
             let i = ul(i);
             quote!(#name[#i])
@@ -368,6 +369,48 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
         Some(quote!(SVector<Real, NX>)),
         &mut uses,
     );
+    let (hess_fn, hess_impl) = match &l.dynamics_hessian {
+        Some(f) => {
+            let b = body(f, s, &["hxx", "hux", "huu"], None, &mut uses);
+            (
+                quote! {
+                    /// The dynamics' part of the Lagrangian Hessian: writes the Hessian of
+                    /// `pi' F(x, u, p)` over `(x, u)` as `hxx` (states), `hux` (controls by
+                    /// states) and `huu` (controls).
+                    #[allow(unused_variables, unused_mut, unused_assignments)]
+                    #[inline(never)]
+                    pub fn dynamics_hessian(
+                        x: &SVector<Real, NX>,
+                        u: &SVector<Real, NU>,
+                        p: &SVector<Real, NP>,
+                        pi: &SVector<Real, NX>,
+                        hxx: &mut SMatrix<Real, NX, NX>,
+                        hux: &mut SMatrix<Real, NU, NX>,
+                        huu: &mut SMatrix<Real, NU, NU>,
+                    ) {
+                        #b
+                    }
+                },
+                quote! {
+                    const EXACT_HESSIAN: bool = true;
+
+                    fn dynamics_hessian(
+                        &self,
+                        x: &SVector<Real, NX>,
+                        u: &SVector<Real, NU>,
+                        p: &SVector<Real, NP>,
+                        pi: &SVector<Real, NX>,
+                        hxx: &mut SMatrix<Real, NX, NX>,
+                        hux: &mut SMatrix<Real, NU, NX>,
+                        huu: &mut SMatrix<Real, NU, NU>,
+                    ) {
+                        functions::dynamics_hessian(x, u, p, pi, hxx, hux, huu)
+                    }
+                },
+            )
+        }
+        None => (quote!(), quote!()),
+    };
     let dyn_doc = doc_lines(&format!(
         "Discrete dynamics over one interval ({} s, {}): returns `F(x, u, p)` and writes \
          `a = dF/dx`, `b = dF/du`.{}",
@@ -804,8 +847,9 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
     let (nbx, nr) = (ul(nbx_raw), ul(nr_raw));
     let constant_jacobians = l.constant_residual_jacobians;
     let constant_stage_jacobians = l.constant_stage_residual_jacobians;
-    // One stage Hessian in the QP when `J'WJ` is the same at every stage.
-    let nh = if constant_stage_jacobians {
+    // One stage Hessian in the QP when `J'WJ` is the same at every stage (and no exact
+    // Hessian adds the dynamics' curvature stage by stage).
+    let nh = if constant_stage_jacobians && l.dynamics_hessian.is_none() {
         ul(1)
     } else {
         n.clone()
@@ -856,7 +900,8 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
         /// recursion (and ignores a `QpMethod::Riccati` setting).
         pub const NR: usize = #nr;
         /// Stage Hessians in the QP: `1` when the stage residual Jacobians are constants (the
-        /// Gauss-Newton Hessian `J'WJ` is then the same at every stage), `N` otherwise.
+        /// Gauss-Newton Hessian `J'WJ` is then the same at every stage, and the solver was not
+        /// generated with the exact Hessian), `N` otherwise.
         pub const NH: usize = #nh;
         /// Interval length in seconds.
         pub const DT: Real = #dt;
@@ -926,6 +971,8 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
                 #dynv_body
             }
 
+            #hess_fn
+
             #res_doc
             #[allow(unused_variables, unused_mut, unused_assignments)]
             pub fn residual(
@@ -970,6 +1017,7 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
         impl mpc_runtime::Model<Real, NX, NU, NP, NY, NYN, NG, NGN> for Model {
             const CONSTANT_RESIDUAL_JACOBIANS: bool = #constant_jacobians;
             const CONSTANT_STAGE_RESIDUAL_JACOBIANS: bool = #constant_stage_jacobians;
+            #hess_impl
 
             fn dynamics(
                 &self,

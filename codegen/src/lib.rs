@@ -33,7 +33,7 @@ use sha2::{Digest, Sha256};
 
 pub use builder::Builder;
 pub use error::CodegenError;
-pub use lower::{Lowered, lower};
+pub use lower::{Lowered, lower, lower_with};
 pub use options::{Options, QpMethod, QpOptions, RuntimeDep, Scalar};
 
 /// The generator version written into every stamp.
@@ -139,7 +139,7 @@ fn allows() -> proc_macro2::TokenStream {
 /// Those of [`lower`](fn@lower), and [`CodegenError::Option`] for a crate name that is not a valid
 /// identifier.
 pub fn generate(ocp: &Ocp<'_>, opts: &Options) -> Result<GeneratedCrate, CodegenError> {
-    let l = lower(ocp)?;
+    let l = lower_with(ocp, opts.exact_hessian)?;
     let name = opts.crate_name(&l.name);
     check_ident(&name)?;
     let items = emit::items(&l, opts);
@@ -202,7 +202,7 @@ pub fn generate_module(
     opts: &Options,
 ) -> Result<String, CodegenError> {
     check_ident(module)?;
-    let l = lower(ocp)?;
+    let l = lower_with(ocp, opts.exact_hessian)?;
     let items = emit::items(&l, opts);
     let ffi = if opts.c_abi {
         emit::ffi(&l, opts)

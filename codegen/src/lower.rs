@@ -39,6 +39,8 @@ pub enum Arg {
     U,
     /// The parameters `p`.
     P,
+    /// The dynamics multipliers `pi` (one per state), of the Lagrangian Hessian.
+    Pi,
 }
 
 /// Where an output of a [`Function`] is written.
@@ -120,6 +122,9 @@ pub struct Lowered {
     pub dynamics: Function,
     /// `F` alone.
     pub dynamics_value: Function,
+    /// The Hessian of `pi' F(x, u, p)` over `(x, u)`, as `hxx`, `hux`, `huu` (with
+    /// [`lower_with`]'s `exact_hessian`).
+    pub dynamics_hessian: Option<Function>,
     /// `y`, `J_x`, `J_u`.
     pub residual: Function,
     /// `y_N`, `J_x`.
@@ -234,6 +239,7 @@ struct Builder<'g> {
     x: Vec<Expr<'g>>,
     u: Vec<Expr<'g>>,
     p: Vec<Expr<'g>>,
+    pi: Vec<Expr<'g>>,
 }
 
 impl<'g> Builder<'g> {
@@ -252,6 +258,7 @@ impl<'g> Builder<'g> {
                 Arg::X => &self.x,
                 Arg::U => &self.u,
                 Arg::P => &self.p,
+                Arg::Pi => &self.pi,
             };
             for (i, &s) in v.iter().enumerate() {
                 inputs.push((a, i));
@@ -269,6 +276,7 @@ impl<'g> Builder<'g> {
                         Arg::X => "states",
                         Arg::U => "controls",
                         Arg::P => "parameters",
+                        Arg::Pi => "dynamics multipliers",
                     })
                     .collect::<Vec<_>>()
                     .join(", "),
@@ -335,6 +343,15 @@ impl<'g> Builder<'g> {
 /// when a terminal function uses a control or a weight uses a per-stage parameter;
 /// [`CodegenError::Dsl`] for errors of the symbolic layer.
 pub fn lower<'g>(ocp: &Ocp<'g>) -> Result<Lowered, CodegenError> {
+    lower_with(ocp, false)
+}
+
+/// [`lower`], and with `exact_hessian` the dynamics' part of the Lagrangian Hessian
+/// ([`Lowered::dynamics_hessian`]).
+///
+/// # Errors
+/// As [`lower`].
+pub fn lower_with<'g>(ocp: &Ocp<'g>, exact_hessian: bool) -> Result<Lowered, CodegenError> {
     ocp.validate().map_err(CodegenError::Invalid)?;
     let g: &Graph = match ocp.states.first() {
         Some(v) => match v.symbols.first() {
@@ -361,11 +378,15 @@ pub fn lower<'g>(ocp: &Ocp<'g>) -> Result<Lowered, CodegenError> {
     let mut x: Vec<Expr<'_>> = xm.to_vec();
     x.extend(u_last.iter().copied());
     let nx = x.len();
+    // The dynamics multipliers of the Lagrangian Hessian (`$` keeps them apart from the
+    // model's names).
+    let pi: Vec<Expr<'_>> = (0..nx).map(|i| g.symbol(&format!("$pi[{i}]"))).collect();
     let b = Builder {
         g,
         x: x.clone(),
         u: u.to_vec(),
         p: p.to_vec(),
+        pi: pi.clone(),
     };
     let (n, dt) = (ocp.horizon.n, ocp.horizon.dt);
 
@@ -376,6 +397,7 @@ pub fn lower<'g>(ocp: &Ocp<'g>) -> Result<Lowered, CodegenError> {
             x: xm.to_vec(),
             u: u.to_vec(),
             p: p.to_vec(),
+            pi: Vec::new(),
         };
         let mut wrt = xm.to_vec();
         wrt.extend(u.iter().copied());
@@ -457,6 +479,32 @@ pub fn lower<'g>(ocp: &Ocp<'g>) -> Result<Lowered, CodegenError> {
         .collect();
     let dynamics = b.function("dynamics", &[Arg::X, Arg::U, Arg::P], dyn_out)?;
     let dynamics_value = b.function("dynamics value", &[Arg::X, Arg::U, Arg::P], value_out)?;
+    // The dynamics' part of the Lagrangian Hessian, `sum_i pi_i d2F_i/d(x, u)2`, for the full
+    // SQP: the symbolic Hessian of the scalar `pi' F` (the input-rate states' `F` is `u`,
+    // linear, so only the model states' multipliers enter).
+    let dynamics_hessian = if exact_hessian {
+        let mut lagrangian = g.zero();
+        for (&e, &m) in fx_next.iter().zip(&pi) {
+            lagrangian += m * e;
+        }
+        let mut wrt = x.clone();
+        wrt.extend(u.iter().copied());
+        let hess = g.hessian(lagrangian, &wrt)?;
+        let mut out = Vec::with_capacity(hess.nnz());
+        for (i, j, e) in hess.iter() {
+            let target = match (i < nx, j < nx) {
+                (true, true) => Target::Mat("hxx", i, j),
+                (false, true) => Target::Mat("hux", i - nx, j),
+                (false, false) => Target::Mat("huu", i - nx, j - nx),
+                // The upper right block is `hux` transposed.
+                (true, false) => continue,
+            };
+            out.push((e, target));
+        }
+        Some(b.function("dynamics Hessian", &[Arg::X, Arg::U, Arg::P, Arg::Pi], out)?)
+    } else {
+        None
+    };
 
     // ---- residuals and weights ----------------------------------------------------------
     let mut y: Vec<Expr<'_>> = Vec::new();
@@ -572,6 +620,7 @@ pub fn lower<'g>(ocp: &Ocp<'g>) -> Result<Lowered, CodegenError> {
         x: Vec::new(),
         u: Vec::new(),
         p: global,
+        pi: Vec::new(),
     };
     bw.function("weights", &[Arg::P], wout.clone())
         .map_err(|e| match e {
@@ -694,6 +743,7 @@ pub fn lower<'g>(ocp: &Ocp<'g>) -> Result<Lowered, CodegenError> {
                 x: Vec::new(),
                 u: Vec::new(),
                 p: without,
+                pi: Vec::new(),
             };
             bu.function("weights", &[Arg::P], wout).is_err()
         }
@@ -715,6 +765,7 @@ pub fn lower<'g>(ocp: &Ocp<'g>) -> Result<Lowered, CodegenError> {
         discretization,
         dynamics,
         dynamics_value,
+        dynamics_hessian,
         residual,
         terminal_residual,
         constant_residual_jacobians,

@@ -83,6 +83,14 @@ pub struct Options {
     pub staticlib: bool,
     /// The `mpc-runtime` dependency of the generated `Cargo.toml`.
     pub runtime: RuntimeDep,
+    /// Emit the dynamics' part of the Lagrangian Hessian (`Model::dynamics_hessian`) and give
+    /// the QP one Hessian per stage (`NH = N`): the full SQP ([`solve_sqp`]) then takes
+    /// exact-Hessian (Newton) steps, which converge quadratically where Gauss-Newton's
+    /// converge linearly. The real-time iteration stays Gauss-Newton. Costs code size and,
+    /// for models whose stage Hessian would otherwise be shared, RAM and preparation time.
+    ///
+    /// [`solve_sqp`]: mpc_runtime::Rti::solve_sqp
+    pub exact_hessian: bool,
 }
 
 impl Options {
@@ -102,14 +110,20 @@ impl Options {
     /// A stable one-line description, part of the stamp hash.
     pub(crate) fn describe(&self) -> String {
         format!(
-            "scalar={} crate={:?} qp={:?} shift={:?} c_abi={} staticlib={} runtime={:?}",
+            "scalar={} crate={:?} qp={:?} shift={:?} c_abi={} staticlib={} runtime={:?}{}",
             self.scalar.rust(),
             self.crate_name,
             self.qp,
             self.shift,
             self.c_abi,
             self.staticlib,
-            self.runtime
+            self.runtime,
+            // Only when on, so the stamps of existing crates do not change.
+            if self.exact_hessian {
+                " exact_hessian"
+            } else {
+                ""
+            }
         )
     }
 }
