@@ -125,7 +125,11 @@ macro_rules! fly {
         let mut x = X0;
         for _ in 0..steps {
             let t0 = Instant::now();
-            s.prepare();
+            // The full SQP linearizes for itself, and QR-bench's solvers do not shift: the
+            // preparation phase would be work thrown away.
+            if !$sqp {
+                s.prepare();
+            }
             let t1 = Instant::now();
             let _ = s.set_x0(&x.map(cast));
             let info = if $sqp { s.solve_sqp() } else { s.feedback() };
@@ -213,14 +217,36 @@ pub(crate) const CASES: [(usize, bool, &str); 6] = [
     ),
 ];
 
-/// Flies the closed loop of the given case.
+/// The cases with a solver generated with the exact Hessian (`--exact-hessian`), for the
+/// full SQP: (horizon, solver).
+pub(crate) const EXACT_CASES: [(usize, &str); 2] = [
+    (
+        10,
+        "quadrotor_rates_a_exact (QR-bench A: N = 10, dt = 0.04, f64, exact Hessian)",
+    ),
+    (
+        20,
+        "quadrotor_rates_b_exact (QR-bench B: N = 20, dt = 0.05, f64, exact Hessian)",
+    ),
+];
+
+/// Flies the closed loop of the given case (`exact`: the solver generated with the exact
+/// Hessian, where there is one).
 /// `over`: settings to override (else the solver's defaults).
 pub(crate) fn fly_case(
     horizon: usize,
     f32: bool,
     sqp: bool,
+    exact: bool,
     over: Overrides,
 ) -> Option<ClosedLoop> {
+    if exact {
+        return match (horizon, f32) {
+            (10, false) => Some(fly!(quadrotor_rates_a_exact, sqp, over)),
+            (20, false) => Some(fly!(quadrotor_rates_b_exact, sqp, over)),
+            _ => None,
+        };
+    }
     match (horizon, f32) {
         (10, false) => Some(fly!(quadrotor_rates_a, sqp, over)),
         (20, false) => Some(fly!(quadrotor_rates, sqp, over)),
@@ -267,6 +293,8 @@ struct Report {
     horizon: usize,
     scalar: &'static str,
     mode: &'static str,
+    /// The full SQP's Hessian: `exact` or `gauss-newton` (the real-time iteration's).
+    hessian: &'static str,
     rounds: usize,
     steps: usize,
     prepare_us: Stats,
@@ -381,6 +409,33 @@ pub(crate) fn run(args: &BenchArgs) -> ExitCode {
             return ExitCode::from(2);
         }
     };
+    // The full SQP's Hessian: exact where a solver generated with it is compiled in.
+    let exact_solver = EXACT_CASES
+        .iter()
+        .find(|c| !pointmass && !args.f32 && c.0 == args.horizon)
+        .map(|c| c.1);
+    let (exact, solver) = match (args.hessian.as_deref(), exact_solver) {
+        (Some(_), _) if !args.sqp => {
+            eprintln!(
+                "error: --hessian applies to the full SQP (the real-time iteration is \
+                 Gauss-Newton): add --sqp"
+            );
+            return ExitCode::from(2);
+        }
+        (None | Some("exact"), Some(s)) if args.sqp => (true, s),
+        (None | Some("gauss-newton"), _) => (false, solver),
+        (Some("exact"), _) => {
+            eprintln!(
+                "error: --hessian exact: no solver generated with the exact Hessian for this \
+                 case; compiled in: --model qrbench --horizon 10 and --horizon 20 (f64)"
+            );
+            return ExitCode::from(2);
+        }
+        (Some(other), _) => {
+            eprintln!("error: --hessian {other}: use exact or gauss-newton");
+            return ExitCode::from(2);
+        }
+    };
     let over = Overrides {
         loose,
         warm_active_set,
@@ -393,7 +448,7 @@ pub(crate) fn run(args: &BenchArgs) -> ExitCode {
         let run = if pointmass {
             fly_pointmass(args.sqp, over)
         } else {
-            let Some(run) = fly_case(args.horizon, args.f32, args.sqp, over) else {
+            let Some(run) = fly_case(args.horizon, args.f32, args.sqp, exact, over) else {
                 return ExitCode::FAILURE;
             };
             run
@@ -455,6 +510,7 @@ pub(crate) fn run(args: &BenchArgs) -> ExitCode {
         horizon: args.horizon,
         scalar: if args.f32 { "f32" } else { "f64" },
         mode: if args.sqp { "sqp" } else { "rti" },
+        hessian: if exact { "exact" } else { "gauss-newton" },
         rounds: args.rounds,
         steps: run.controls.len(),
         prepare_us: Stats::of(&prep),
@@ -502,9 +558,9 @@ pub(crate) fn run(args: &BenchArgs) -> ExitCode {
         }
         if args.sqp {
             println!(
-                "SQP iterations per step: mean {:.2}; {} steps stopped at the iteration limit \
-                 (their iterate is kept)",
-                report.sqp_iterations_mean, report.sqp_limit_steps
+                "SQP iterations per step ({} Hessian): mean {:.2}; {} steps stopped at the \
+                 iteration limit (their iterate is kept)",
+                report.hessian, report.sqp_iterations_mean, report.sqp_limit_steps
             );
         }
         println!(
