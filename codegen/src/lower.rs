@@ -378,9 +378,13 @@ pub fn lower_with<'g>(ocp: &Ocp<'g>, exact_hessian: bool) -> Result<Lowered, Cod
     let mut x: Vec<Expr<'_>> = xm.to_vec();
     x.extend(u_last.iter().copied());
     let nx = x.len();
-    // The dynamics multipliers of the Lagrangian Hessian (`$` keeps them apart from the
-    // model's names).
-    let pi: Vec<Expr<'_>> = (0..nx).map(|i| g.symbol(&format!("$pi[{i}]"))).collect();
+    // The dynamics multipliers of the Lagrangian Hessian, made only when it is (`$` keeps
+    // them apart from the model's names).
+    let pi: Vec<Expr<'_>> = if exact_hessian {
+        (0..nx).map(|i| g.symbol(&format!("$pi[{i}]"))).collect()
+    } else {
+        Vec::new()
+    };
     let b = Builder {
         g,
         x: x.clone(),

@@ -168,6 +168,18 @@ fn exact_hessian_converges_quadratically_and_gauss_newton_linearly() {
     );
     let ex = errors(&mut converged(1.0, true), &reference);
     let gn = errors(&mut converged(1.0, false), &reference);
+    // The sequences the docs quote (`-- --nocapture`).
+    let show = |e: &[f64]| {
+        e.iter()
+            .map(|v| format!("{v:.1e}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    eprintln!(
+        "distance to the solution per iteration, exact: {}",
+        show(&ex)
+    );
+    eprintln!("Gauss-Newton: {}", show(&gn));
     eprintln!("exact {ex:?}\nGauss-Newton {gn:?}");
     // Iterations from within 1e-2 of the solution to within 1e-10.
     let tail = |e: &[f64]| {
