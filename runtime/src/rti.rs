@@ -15,7 +15,7 @@
 
 use nalgebra::{SMatrix, SVector};
 
-use crate::kernels::{mul, mul_mostly_zero_into, tr_mul_add_into};
+use crate::kernels::{mul, mul_mostly_zero_into, tr_mul, tr_mul_add_into};
 use crate::model::Model;
 use crate::qp::{OcpQp, QpInfo, QpSettings, QpSolver, QpStatus};
 use crate::real::Real;
@@ -35,6 +35,14 @@ pub struct RtiSettings<T> {
     pub sqp_max_iter: u32,
     /// [`Rti::solve_sqp`] stops when the largest step entry is below this.
     pub sqp_tol: T,
+    /// [`Rti::solve_sqp`] also stops, before solving another QP, at an iterate that meets
+    /// the KKT conditions to this tolerance with the last QP's dynamics multipliers `pi`:
+    /// every dynamics defect and, per entry of each state and control, the Lagrangian's
+    /// gradient projected on the bounds (its natural residual, which holds the bounds'
+    /// violation too) at most this, as CasADi's `sqpmethod` stops on `tol_pr` and `tol_du`.
+    /// Checked where no general constraint has a bound (their multipliers are not kept);
+    /// 0 turns it off. Default [`Real::SQP_TOL`].
+    pub sqp_kkt_tol: T,
     /// [`Rti::solve_sqp`] solves its QPs by the interior point to 1e-3 and then the
     /// active-set polish, which ends on the exact solution once the interior point has the
     /// active set; a QP whose polish is refused, or that it does not handle (soft rows), is
@@ -48,6 +56,11 @@ pub struct RtiSettings<T> {
     /// whose step does not decrease the merit function, is taken again with the
     /// Gauss-Newton Hessian. Default on; without the model's Hessian it does nothing.
     pub sqp_exact_hessian: bool,
+    /// Exact-Hessian steps of [`Rti::solve_sqp`] that the watchdog takes whole without their
+    /// decreasing the merit function, in a row, before it goes back to the iterate before
+    /// them and searches monotonically (see `solve_sqp`). 0: every step searches
+    /// monotonically. Default 4.
+    pub sqp_watchdog: u32,
 }
 
 impl<T: Real> RtiSettings<T> {
@@ -72,8 +85,10 @@ impl<T: Real> RtiSettings<T> {
         shift: false,
         sqp_max_iter: 50,
         sqp_tol: T::SQP_TOL,
+        sqp_kkt_tol: T::SQP_TOL,
         sqp_loose_qps: T::SQP_LOOSE_QPS,
         sqp_exact_hessian: true,
+        sqp_watchdog: 4,
     };
 
     /// Every setting zero (no QP iteration, no SQP iteration): [`Rti::unconfigured`]'s.
@@ -82,8 +97,10 @@ impl<T: Real> RtiSettings<T> {
         shift: false,
         sqp_max_iter: 0,
         sqp_tol: T::ZERO,
+        sqp_kkt_tol: T::ZERO,
         sqp_loose_qps: false,
         sqp_exact_hessian: false,
+        sqp_watchdog: 0,
     };
 }
 
@@ -110,7 +127,8 @@ pub struct RtiInfo<T> {
     pub status: RtiStatus,
     /// The last QP solve.
     pub qp: QpInfo<T>,
-    /// SQP iterations (1 for a real-time iteration).
+    /// SQP iterations (1 for a real-time iteration): the QPs solved, where an iteration whose
+    /// exact-Hessian QP failed and was solved again with Gauss-Newton's counts once.
     pub sqp_iterations: u32,
 }
 
@@ -215,6 +233,12 @@ pub struct Rti<
     xt: [SVector<T, NX>; N],
     xnt: SVector<T, NX>,
     ut: [SVector<T, NU>; N],
+    /// The full SQP's watchdog reference: the iterate before the first watched Newton step.
+    /// Only the exact-Hessian SQP watches, and it needs a Hessian per stage (`NH = N`): in
+    /// other solvers (`NH = 1`) this costs one stage.
+    xw: [SVector<T, NX>; NH],
+    xnw: SVector<T, NX>,
+    uw: [SVector<T, NU>; NH],
 }
 
 fn all_finite<T: Real, const R: usize, const C: usize>(m: &SMatrix<T, R, C>) -> bool {
@@ -397,6 +421,9 @@ impl<
             xt: [crate::zeros(); N],
             xnt: crate::zeros(),
             ut: [crate::zeros(); N],
+            xw: [crate::zeros(); NH],
+            xnw: crate::zeros(),
+            uw: [crate::zeros(); NH],
         }
     }
 
@@ -851,17 +878,66 @@ impl<
         }
     }
 
+    /// The largest KKT residual of the NLP at the current iterate, from its linearization in
+    /// the QP data (a zero step) and the last QP's dynamics multipliers `pi`: the
+    /// initial-state and dynamics defects, and for each state (but `x_0`, which is fixed)
+    /// and control the natural residual `clamp(-r, lo, hi)` of the Lagrangian's gradient
+    /// `r` against the step's bounds `lo <= 0 <= hi`: `|r|` away from the bounds, the
+    /// distance to a bound that `r` pushes against (a bound multiplier `|r|` of the right
+    /// sign is then complementary to it to that distance), and at least the violation of a
+    /// violated bound. `None` where a general constraint has a bound (its multiplier is not
+    /// kept), or without stages.
+    fn kkt_residual(&self) -> Option<T> {
+        fn bounded<T: Real, const K: usize>(lo: &SVector<T, K>, hi: &SVector<T, K>) -> bool {
+            lo.iter().any(|&l| l > -T::INF) || hi.iter().any(|&h| h < T::INF)
+        }
+        fn natural<T: Real, const K: usize>(
+            r: &SVector<T, K>,
+            lo: &SVector<T, K>,
+            hi: &SVector<T, K>,
+        ) -> T {
+            let mut m = T::ZERO;
+            for i in 0..K {
+                m = m.max((-r[i]).max(lo[i]).min(hi[i]).abs());
+            }
+            m
+        }
+        let pi = &self.solver.solution().pi;
+        let t = &self.qp.terminal;
+        if N == 0 || bounded(&t.lg, &t.ug) {
+            return None;
+        }
+        let mut res = self.qp.x0.amax();
+        let mut prev: Option<&SVector<T, NX>> = None;
+        for (s, pik) in self.qp.stages.iter().zip(pi) {
+            if bounded(&s.lg, &s.ug) {
+                return None;
+            }
+            res = res.max(s.f.amax());
+            let ru = s.gu + tr_mul(&s.b, pik);
+            res = res.max(natural(&ru, &s.lbu, &s.ubu));
+            if let Some(pp) = prev {
+                let rx = s.gx + tr_mul(&s.a, pik) - pp;
+                res = res.max(natural(&rx, &s.lbx, &s.ubx));
+            }
+            prev = Some(pik);
+        }
+        let rxn = prev.map_or(t.gx, |pp| t.gx - pp);
+        Some(res.max(natural(&rxn, &t.lbx, &t.ubx)))
+    }
+
     /// Adds the dynamics' part of the Lagrangian Hessian at the last QP's multipliers,
     /// `sum_i pi_i d2F_i/d(x, u)2` ([`Model::dynamics_hessian`]), to every stage's Hessian of
-    /// the QP (`NH = N`). Returns whether it did: not for zero multipliers (no QP solved
-    /// yet, where the Hessians stay Gauss-Newton's) nor non-finite ones.
+    /// the QP (`NH = N`). Returns whether the QP's Hessian is then the Lagrangian's: also
+    /// for zero multipliers (no QP solved yet), whose curvature is zero; not for non-finite
+    /// ones.
     fn add_dynamics_curvature(&mut self) -> bool {
         let pi = &self.solver.solution().pi;
-        if NH != N
-            || !pi.iter().all(all_finite)
-            || pi.iter().all(|p| p.iter().all(|&v| v == T::ZERO))
-        {
+        if NH != N || !pi.iter().all(all_finite) {
             return false;
+        }
+        if pi.iter().all(|p| p.iter().all(|&v| v == T::ZERO)) {
+            return true;
         }
         let mut hxx = SMatrix::<T, NX, NX>::zeros();
         let mut hux = SMatrix::<T, NU, NX>::zeros();
@@ -886,9 +962,12 @@ impl<
     /// exact-Hessian ones where the model provides the dynamics' Hessian
     /// ([`RtiSettings::sqp_exact_hessian`]), with a line search on an exact L1 merit function
     /// (`cost + soft-constraint penalties + nu |dynamics defects|_1`, `nu` twice the largest
-    /// dynamics multiplier), until the largest entry of the QP step is below
-    /// `settings.sqp_tol` or `settings.sqp_max_iter` iterations. For offline planning and
-    /// tests. The trajectory is left at the last accepted iterate. Each QP is solved to at
+    /// dynamics multiplier; exact-Hessian steps under a watchdog,
+    /// [`RtiSettings::sqp_watchdog`]), until the iterate meets the KKT conditions to
+    /// `settings.sqp_kkt_tol`, the largest entry of the QP step is below `settings.sqp_tol`,
+    /// or `settings.sqp_max_iter` iterations. For offline planning and tests. The trajectory
+    /// is left at the last accepted iterate (the watchdog's reference where its steps did not
+    /// pay by the last iteration). Each QP is solved to at
     /// least the QP solver's default tolerances: with `settings.sqp_loose_qps` (on in f64) by
     /// the interior point to 1e-3 and then the active-set polish (exact once the interior
     /// point has the active set), or, where the polish is refused or does not apply (soft
@@ -930,12 +1009,22 @@ impl<
         loose_settings.polish = false;
         let exact = M::EXACT_HESSIAN && NH == N && self.settings.sqp_exact_hessian;
         let mut gauss_newton_next = false;
+        let mut watchdog_on = exact && self.settings.sqp_watchdog > 0;
+        let mut watch: Option<((T, T), u32)> = None;
         // The merit's parts (cost, defects) at the current iterate, where known.
         let mut here: Option<(T, T)> = None;
         for it in 0..self.settings.sqp_max_iter {
             self.linearize();
             let x_lin0 = self.x.first().copied().unwrap_or(*x0);
             self.qp.x0 = x0 - x_lin0;
+            // Converged on the KKT conditions with the last QP's multipliers: done without
+            // the QP that would only confirm it (its step under `sqp_tol`).
+            let kkt_tol = self.settings.sqp_kkt_tol;
+            if it > 0 && kkt_tol > T::ZERO && self.kkt_residual().is_some_and(|r| r <= kkt_tol) {
+                self.plan = self.u;
+                self.plan_age = 0;
+                return self.info(RtiStatus::Ok, last, it);
+            }
             let mut curved = exact && !gauss_newton_next && self.add_dynamics_curvature();
             gauss_newton_next = false;
             let loose_before = loose;
@@ -982,6 +1071,73 @@ impl<
             self.xt = self.x;
             self.ut = self.u;
             self.xnt = self.xn;
+            if curved && watchdog_on {
+                // The watchdog (Chamberlain, Powell, Lemarechal and Pedersen, 1982): Newton's
+                // step is taken whole where it decreases the merit below the reference's (the
+                // current iterate's, or while steps are watched, the iterate before the first
+                // of them); up to `sqp_watchdog` steps in a row are taken whole without that
+                // (not in the last iteration, which could not come back), and if none of them
+                // gets there, the iteration goes back to the reference and searches
+                // monotonically from there on. Newton's whole steps converge where the
+                // monotone search crawls: from the hover guess, QR-bench A's first step takes
+                // 30 iterations with it (most of them short steps), 7 with the watchdog
+                // (`mpcc bench --sqp [--sqp-watchdog 0]`: the most iterations in a step).
+                self.apply_step(T::ONE);
+                if let Some(x) = self.x.first_mut() {
+                    *x = *x0;
+                }
+                let parts = self.merit_parts();
+                let phi = parts.0 + nu * parts.1;
+                let (reference, phi_ref) = match watch {
+                    Some((r, _)) => (r, r.0 + nu * r.1),
+                    None => (parts0, phi0),
+                };
+                if phi.finite() && phi < phi_ref {
+                    // Below the reference: accepted, and the watch (if any) ends.
+                    watch = None;
+                    here = Some(parts);
+                    continue;
+                }
+                let relaxed = watch.map_or(0, |(_, n)| n);
+                let last_iteration = it + 1 >= self.settings.sqp_max_iter;
+                if phi.finite() && relaxed < self.settings.sqp_watchdog && !last_iteration {
+                    // Not below it: taken anyway, the iterate before it kept as the
+                    // reference (the first such step's).
+                    if watch.is_none() {
+                        // `NH = N` here (`exact`): the whole trajectory.
+                        for (w, t) in self.xw.iter_mut().zip(&self.xt) {
+                            *w = *t;
+                        }
+                        for (w, t) in self.uw.iter_mut().zip(&self.ut) {
+                            *w = *t;
+                        }
+                        self.xnw = self.xnt;
+                    }
+                    watch = Some((reference, relaxed + 1));
+                    here = Some(parts);
+                    continue;
+                }
+                if watch.is_some() {
+                    // The watched steps did not bring the merit below the reference's: back
+                    // to the reference, and monotone searches for the rest of this solve.
+                    watchdog_on = false;
+                    for (x, w) in self.x.iter_mut().zip(&self.xw) {
+                        *x = *w;
+                    }
+                    for (u, w) in self.u.iter_mut().zip(&self.uw) {
+                        *u = *w;
+                    }
+                    self.xn = self.xnw;
+                    if let Some(x) = self.x.first_mut() {
+                        *x = *x0;
+                    }
+                    watch = None;
+                    here = Some(reference);
+                    continue;
+                }
+                // Nothing watched: this step searches monotonically.
+                self.restore_trial();
+            }
             // Backtracking that keeps halving while the merit keeps improving: it takes the
             // full step where that is best and damps the overshoot of Gauss-Newton steps that
             // oscillate (a plain Armijo test accepts those and converges slowly). An
