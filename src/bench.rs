@@ -1,7 +1,7 @@
 //! `mpcc bench`: the QR-bench closed loop exactly as the peers were measured on it
 //! (`docs/bench.md`): x0 = (0,0,2, 1,0,0,0, 0,0,0), reference (4,0,2) hover, first guess
-//! x_k = x0, u_k = 0, u0 held for one period, plant = the same ODE with RK4 in 10 substeps,
-//! 4 s. Times the preparation and feedback phases of every step over several rounds.
+//! x_k = x0 and u_k = 0 as acados' (`--sqp`: u_k = hover, CasADi's), u0 held for one period,
+//! plant = the same ODE with RK4 in 10 substeps, 4 s. Times the preparation and feedback phases of every step over several rounds.
 //! `--model pointmass`: the paper's point-mass MPC from rest to a 1 m step in x, the exact
 //! triple-integrator plant, 4 s (the generated solver feeds the applied jerk back as its
 //! `u_prev` itself).
@@ -102,7 +102,12 @@ pub(crate) struct Overrides {
     pub loose: Option<bool>,
     /// `QpSettings::warm_active_set` (`--warm-active-set`).
     pub warm_active_set: Option<bool>,
+    /// `RtiSettings::sqp_watchdog` (`--sqp-watchdog`).
+    pub watchdog: Option<u32>,
 }
+
+/// CasADi's first guess of the controls in QR-bench: the reference, hover.
+const U_HOVER: [f64; 4] = [9.81, 0.0, 0.0, 0.0];
 
 /// Flies QR-bench once with solver crate `$m` (its `Real` may be f32 or f64).
 macro_rules! fly {
@@ -116,9 +121,15 @@ macro_rules! fly {
         if let Some(warm) = over.warm_active_set {
             s.settings_mut().qp.warm_active_set = warm;
         }
+        if let Some(steps) = over.watchdog {
+            s.settings_mut().sqp_watchdog = steps;
+        }
         let cast = |v: f64| v as m::Real;
         let x0: [m::Real; 10] = X0.map(cast);
-        let _ = s.set_guess(&x0, &[0.0; 4]);
+        // Each mode starts where the peer it is compared with did: the real-time iteration
+        // from acados' u = 0, the full SQP from CasADi's u = hover.
+        let u_guess = if $sqp { U_HOVER } else { [0.0; 4] };
+        let _ = s.set_guess(&x0, &u_guess.map(cast));
         let steps = (DURATION / f64::from(m::DT)).round() as usize;
         let dt = f64::from(m::DT);
         let mut out = ClosedLoop::new(dt, QRBENCH_COLUMNS, X0.to_vec());
@@ -308,6 +319,7 @@ struct Report {
     /// the active-set iterations after it.
     qp_active_set_solves_mean: f64,
     sqp_iterations_mean: f64,
+    sqp_iterations_max: u32,
     sqp_limit_steps: usize,
     final_position_error_m: f64,
     all_ok: bool,
@@ -436,9 +448,17 @@ pub(crate) fn run(args: &BenchArgs) -> ExitCode {
             return ExitCode::from(2);
         }
     };
+    if args.sqp_watchdog.is_some() && !(args.sqp && exact) {
+        eprintln!(
+            "error: --sqp-watchdog applies to the full SQP with the exact Hessian: add --sqp \
+             (and leave out --hessian gauss-newton)"
+        );
+        return ExitCode::from(2);
+    }
     let over = Overrides {
         loose,
         warm_active_set,
+        watchdog: args.sqp_watchdog,
     };
     let mut prep = Vec::new();
     let mut feed = Vec::new();
@@ -521,6 +541,7 @@ pub(crate) fn run(args: &BenchArgs) -> ExitCode {
         qp_interior_point_steps: run.qp_iterations.iter().filter(|&&i| i > 0).count(),
         qp_active_set_solves_mean: mean(&run.active_set_solves),
         sqp_iterations_mean: mean(&run.sqp_iterations),
+        sqp_iterations_max: run.sqp_iterations.iter().copied().max().unwrap_or(0),
         sqp_limit_steps: run.sqp_limit_steps,
         final_position_error_m: err,
         all_ok: run.all_ok,
@@ -558,9 +579,12 @@ pub(crate) fn run(args: &BenchArgs) -> ExitCode {
         }
         if args.sqp {
             println!(
-                "SQP iterations per step ({} Hessian): mean {:.2}; {} steps stopped at the \
-                 iteration limit (their iterate is kept)",
-                report.hessian, report.sqp_iterations_mean, report.sqp_limit_steps
+                "SQP iterations per step ({} Hessian): mean {:.2}, max {}; {} steps stopped at \
+                 the iteration limit (their iterate is kept)",
+                report.hessian,
+                report.sqp_iterations_mean,
+                report.sqp_iterations_max,
+                report.sqp_limit_steps
             );
         }
         println!(

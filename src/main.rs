@@ -161,6 +161,11 @@ struct BenchArgs {
     /// the default there) or gauss-newton (the real-time iteration's solvers).
     #[arg(long, value_name = "exact|gauss-newton")]
     hessian: Option<String>,
+    /// With --sqp and the exact Hessian, how many Newton steps in a row the watchdog takes
+    /// whole without their decreasing the merit function before it goes back (default 4;
+    /// 0: a monotone line search at every step). `RtiSettings::sqp_watchdog`.
+    #[arg(long, value_name = "STEPS")]
+    sqp_watchdog: Option<u32>,
     /// How each QP starts: on (the default) from the last QP's active set, factorized in the
     /// preparation phase (the interior point only where that set and the active-set
     /// iterations after it miss); off: every QP by the interior point.
