@@ -1,7 +1,8 @@
 //! `mpcc bench`: the QR-bench closed loop exactly as the peers were measured on it
 //! (`docs/bench.md`): x0 = (0,0,2, 1,0,0,0, 0,0,0), reference (4,0,2) hover, first guess
 //! x_k = x0 and u_k = 0 as acados' (`--sqp`: u_k = hover, CasADi's), u0 held for one period,
-//! plant = the same ODE with RK4 in 10 substeps, 4 s. Times the preparation and feedback phases of every step over several rounds.
+//! plant = the same ODE with RK4 in 10 substeps, 4 s. Times the preparation and feedback
+//! phases of every step over several rounds.
 //! `--model pointmass`: the paper's point-mass MPC from rest to a 1 m step in x, the exact
 //! triple-integrator plant, 4 s (the generated solver feeds the applied jerk back as its
 //! `u_prev` itself).

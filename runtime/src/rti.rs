@@ -52,9 +52,11 @@ pub struct RtiSettings<T> {
     /// [`Rti::solve_sqp`] adds the dynamics' curvature `sum_i pi_i d2F_i/d(x, u)2` to the
     /// Gauss-Newton Hessian of each stage (Newton steps on the Lagrangian, with the last
     /// QP's multipliers `pi`), where the model provides it ([`Model::EXACT_HESSIAN`]) and
-    /// the QP keeps a Hessian per stage (`NH = N`). An iteration whose QP then fails, or
-    /// whose step does not decrease the merit function, is taken again with the
-    /// Gauss-Newton Hessian. Default on; without the model's Hessian it does nothing.
+    /// the QP keeps a Hessian per stage (`NH = N`). An iteration whose QP then fails is
+    /// solved again with the Gauss-Newton Hessian; its steps are judged by the watchdog
+    /// ([`sqp_watchdog`](Self::sqp_watchdog)), and once that has gone back (or without it), a
+    /// step that does not decrease the merit function is dropped and the next iteration is
+    /// Gauss-Newton's. Default on; without the model's Hessian it does nothing.
     pub sqp_exact_hessian: bool,
     /// Exact-Hessian steps of [`Rti::solve_sqp`] that the watchdog takes whole without their
     /// decreasing the merit function, in a row, before it goes back to the iterate before
@@ -130,6 +132,10 @@ pub struct RtiInfo<T> {
     /// SQP iterations (1 for a real-time iteration): the QPs solved, where an iteration whose
     /// exact-Hessian QP failed and was solved again with Gauss-Newton's counts once.
     pub sqp_iterations: u32,
+    /// The full SQP's watchdog went back to its reference ([`RtiSettings::sqp_watchdog`]):
+    /// Newton's steps taken whole did not pay, and the rest of the solve searched
+    /// monotonically.
+    pub watchdog_returned: bool,
 }
 
 impl<T: Real> RtiInfo<T> {
@@ -147,6 +153,7 @@ impl<T: Real> RtiInfo<T> {
             mu: T::ZERO,
         },
         sqp_iterations: 0,
+        watchdog_returned: false,
     };
 }
 
@@ -234,8 +241,9 @@ pub struct Rti<
     xnt: SVector<T, NX>,
     ut: [SVector<T, NU>; N],
     /// The full SQP's watchdog reference: the iterate before the first watched Newton step.
-    /// Only the exact-Hessian SQP watches, and it needs a Hessian per stage (`NH = N`): in
-    /// other solvers (`NH = 1`) this costs one stage.
+    /// Only the exact-Hessian SQP watches, and it needs a Hessian per stage (`NH = N`): a
+    /// solver with one stage Hessian (`NH = 1`) pays for one stage; a Gauss-Newton solver with
+    /// a Hessian per stage (nonlinear residuals) for an unused trajectory.
     xw: [SVector<T, NX>; NH],
     xnw: SVector<T, NX>,
     uw: [SVector<T, NU>; NH],
@@ -780,6 +788,7 @@ impl<
             status,
             qp,
             sqp_iterations,
+            watchdog_returned: false,
         }
     }
 
@@ -907,37 +916,42 @@ impl<
         if N == 0 || bounded(&t.lg, &t.ug) {
             return None;
         }
+        // `max` passes over NaN: every term is checked to be finite first.
         let mut res = self.qp.x0.amax();
+        let mut finite = all_finite(&self.qp.x0);
         let mut prev: Option<&SVector<T, NX>> = None;
         for (s, pik) in self.qp.stages.iter().zip(pi) {
             if bounded(&s.lg, &s.ug) {
                 return None;
             }
-            res = res.max(s.f.amax());
             let ru = s.gu + tr_mul(&s.b, pik);
-            res = res.max(natural(&ru, &s.lbu, &s.ubu));
+            finite &= all_finite(&s.f) && all_finite(&ru);
+            res = res.max(s.f.amax()).max(natural(&ru, &s.lbu, &s.ubu));
             if let Some(pp) = prev {
                 let rx = s.gx + tr_mul(&s.a, pik) - pp;
+                finite &= all_finite(&rx);
                 res = res.max(natural(&rx, &s.lbx, &s.ubx));
             }
             prev = Some(pik);
         }
         let rxn = prev.map_or(t.gx, |pp| t.gx - pp);
-        Some(res.max(natural(&rxn, &t.lbx, &t.ubx)))
+        finite &= all_finite(&rxn);
+        res = res.max(natural(&rxn, &t.lbx, &t.ubx));
+        (finite && res.finite()).then_some(res)
     }
 
     /// Adds the dynamics' part of the Lagrangian Hessian at the last QP's multipliers,
     /// `sum_i pi_i d2F_i/d(x, u)2` ([`Model::dynamics_hessian`]), to every stage's Hessian of
-    /// the QP (`NH = N`). Returns whether the QP's Hessian is then the Lagrangian's: also
-    /// for zero multipliers (no QP solved yet), whose curvature is zero; not for non-finite
-    /// ones.
-    fn add_dynamics_curvature(&mut self) -> bool {
+    /// the QP (`NH = N`). `Some(added)` where the QP's Hessian is then the Lagrangian's,
+    /// `added` whether it changed (not for zero multipliers, before any QP, whose curvature
+    /// is zero: the Hessian is Gauss-Newton's as it is); `None` for non-finite multipliers.
+    fn add_dynamics_curvature(&mut self) -> Option<bool> {
         let pi = &self.solver.solution().pi;
         if NH != N || !pi.iter().all(all_finite) {
-            return false;
+            return None;
         }
         if pi.iter().all(|p| p.iter().all(|&v| v == T::ZERO)) {
-            return true;
+            return Some(false);
         }
         let mut hxx = SMatrix::<T, NX, NX>::zeros();
         let mut hux = SMatrix::<T, NU, NX>::zeros();
@@ -955,7 +969,7 @@ impl<
         }
         // The next linearization writes the Gauss-Newton terms again.
         self.gn_current = false;
-        true
+        Some(true)
     }
 
     /// Full SQP from the current trajectory with `x_0` fixed to `x0`: Gauss-Newton steps, or
@@ -1010,7 +1024,9 @@ impl<
         let exact = M::EXACT_HESSIAN && NH == N && self.settings.sqp_exact_hessian;
         let mut gauss_newton_next = false;
         let mut watchdog_on = exact && self.settings.sqp_watchdog > 0;
+        // The merit's parts at the watchdog's reference and the steps watched since.
         let mut watch: Option<((T, T), u32)> = None;
+        let mut returned = false;
         // The merit's parts (cost, defects) at the current iterate, where known.
         let mut here: Option<(T, T)> = None;
         for it in 0..self.settings.sqp_max_iter {
@@ -1023,9 +1039,20 @@ impl<
             if it > 0 && kkt_tol > T::ZERO && self.kkt_residual().is_some_and(|r| r <= kkt_tol) {
                 self.plan = self.u;
                 self.plan_age = 0;
-                return self.info(RtiStatus::Ok, last, it);
+                return RtiInfo {
+                    watchdog_returned: returned,
+                    ..self.info(RtiStatus::Ok, last, it)
+                };
             }
-            let mut curved = exact && !gauss_newton_next && self.add_dynamics_curvature();
+            // A Newton step: the QP's Hessian is the Lagrangian's (`curved`: with the
+            // dynamics' curvature added, not zero).
+            let hessian = if exact && !gauss_newton_next {
+                self.add_dynamics_curvature()
+            } else {
+                None
+            };
+            let mut newton = hessian.is_some();
+            let mut curved = hessian == Some(true);
             gauss_newton_next = false;
             let loose_before = loose;
             last = self.solve_sqp_qp(&mut loose, &loose_settings, &tight);
@@ -1033,12 +1060,15 @@ impl<
                 // The QP with the curvature is not convex where it must be (or broke down):
                 // this iteration with Gauss-Newton's Hessian, which is.
                 self.linearize();
-                curved = false;
+                (newton, curved) = (false, false);
                 loose = loose_before;
                 last = self.solve_sqp_qp(&mut loose, &loose_settings, &tight);
             }
             if last.status != QpStatus::Solved || !self.step_is_finite() {
-                return self.info(RtiStatus::UsedPreviousPlan, last, it + 1);
+                return RtiInfo {
+                    watchdog_returned: returned,
+                    ..self.info(RtiStatus::UsedPreviousPlan, last, it + 1)
+                };
             }
             let sol = self.solver.solution();
             let mut step = sol.xn.amax();
@@ -1059,7 +1089,10 @@ impl<
                 }
                 self.plan = self.u;
                 self.plan_age = 0;
-                return self.info(RtiStatus::Ok, last, it + 1);
+                return RtiInfo {
+                    watchdog_returned: returned,
+                    ..self.info(RtiStatus::Ok, last, it + 1)
+                };
             }
             // The merit's parts at the current iterate: those of the step accepted last (the
             // pinned first state has not moved since), else evaluated.
@@ -1071,7 +1104,7 @@ impl<
             self.xt = self.x;
             self.ut = self.u;
             self.xnt = self.xn;
-            if curved && watchdog_on {
+            if newton && watchdog_on {
                 // The watchdog (Chamberlain, Powell, Lemarechal and Pedersen, 1982): Newton's
                 // step is taken whole where it decreases the merit below the reference's (the
                 // current iterate's, or while steps are watched, the iterate before the first
@@ -1080,7 +1113,7 @@ impl<
                 // gets there, the iteration goes back to the reference and searches
                 // monotonically from there on. Newton's whole steps converge where the
                 // monotone search crawls: from the hover guess, QR-bench A's first step takes
-                // 30 iterations with it (most of them short steps), 7 with the watchdog
+                // 32 iterations with it (most of them short steps), 7 with the watchdog
                 // (`mpcc bench --sqp [--sqp-watchdog 0]`: the most iterations in a step).
                 self.apply_step(T::ONE);
                 if let Some(x) = self.x.first_mut() {
@@ -1121,16 +1154,8 @@ impl<
                     // The watched steps did not bring the merit below the reference's: back
                     // to the reference, and monotone searches for the rest of this solve.
                     watchdog_on = false;
-                    for (x, w) in self.x.iter_mut().zip(&self.xw) {
-                        *x = *w;
-                    }
-                    for (u, w) in self.u.iter_mut().zip(&self.uw) {
-                        *u = *w;
-                    }
-                    self.xn = self.xnw;
-                    if let Some(x) = self.x.first_mut() {
-                        *x = *x0;
-                    }
+                    returned = true;
+                    self.restore_reference(x0);
                     watch = None;
                     here = Some(reference);
                     continue;
@@ -1176,6 +1201,12 @@ impl<
             // smallest step tried, so the iteration cannot stall on a stale linearization.
             let alpha = if best.0 > T::ZERO {
                 here = Some(best.2);
+                // A watch ends where a searched step, too, gets below its reference.
+                if let Some(((c, d), _)) = watch
+                    && best.1 < c + nu * d
+                {
+                    watch = None;
+                }
                 best.0
             } else {
                 alpha * T::lit(2.0)
@@ -1186,7 +1217,31 @@ impl<
                 *x = *x0;
             }
         }
-        self.info(RtiStatus::MaxIterations, last, self.settings.sqp_max_iter)
+        if watch.is_some() {
+            // Steps still watched at the limit (their QPs were not Newton's, so the watchdog
+            // did not judge them): nothing got below the reference, which is kept.
+            returned = true;
+            self.restore_reference(x0);
+        }
+        RtiInfo {
+            watchdog_returned: returned,
+            ..self.info(RtiStatus::MaxIterations, last, self.settings.sqp_max_iter)
+        }
+    }
+
+    /// Back to the watchdog's reference ([`solve_sqp`](Self::solve_sqp); `NH = N` there),
+    /// `x_0` pinned to `x0`.
+    fn restore_reference(&mut self, x0: &SVector<T, NX>) {
+        for (x, w) in self.x.iter_mut().zip(&self.xw) {
+            *x = *w;
+        }
+        for (u, w) in self.u.iter_mut().zip(&self.uw) {
+            *u = *w;
+        }
+        self.xn = self.xnw;
+        if let Some(x) = self.x.first_mut() {
+            *x = *x0;
+        }
     }
 }
 

@@ -308,8 +308,8 @@ fn the_watchdog_takes_whole_newton_steps_from_a_cold_start() {
 
 /// A Hessian ten times the dynamics' curvature keeps the QPs convex but makes poor steps:
 /// the watched ones do not bring the merit below their reference, and the watchdog goes
-/// back to it (seen with a print there: once, after its 4 steps) and searches
-/// monotonically from there; the solve still ends on Gauss-Newton's solution.
+/// back to it (`RtiInfo::watchdog_returned`) and searches monotonically from there; the
+/// solve still ends on Gauss-Newton's solution.
 #[test]
 fn poor_newton_steps_send_the_watchdog_back_and_the_solve_still_converges() {
     let mut gn = swing_up(1.0, false);
@@ -319,6 +319,35 @@ fn poor_newton_steps_send_the_watchdog_back_and_the_solve_still_converges() {
     s.settings.sqp_max_iter = 300;
     let info = s.solve_sqp(&SVector::from(X0));
     assert_eq!(info.status, RtiStatus::Ok, "{info:?}");
+    assert!(info.watchdog_returned, "{info:?}");
     let d = distance(&gn, &s);
     assert!(d <= 1e-7, "{d} from Gauss-Newton's solution");
+    // With the true curvature the watched steps pay: no way back.
+    let mut good = swing_up(1.0, true);
+    good.settings.sqp_max_iter = 300;
+    let info = good.solve_sqp(&SVector::from(X0));
+    assert_eq!(info.status, RtiStatus::Ok, "{info:?}");
+    assert!(!info.watchdog_returned, "{info:?}");
+}
+
+/// Cut off at every iteration limit up to 62 (at 63 it converges), the poor Hessian's cold start ends with a
+/// finite plan from the pinned `x0`, at the watchdog's reference where a watch was open
+/// (its last steps not judged) or where it had gone back: both say `watchdog_returned`,
+/// which happens from a limit of 49 iterations on (measured).
+#[test]
+fn solves_cut_off_by_the_iteration_limit_end_on_a_finite_plan() {
+    let mut went_back = 0;
+    for limit in 1..=62 {
+        let mut s = swing_up(10.0, true);
+        s.settings.sqp_max_iter = limit;
+        let info = s.solve_sqp(&SVector::from(X0));
+        assert_eq!(info.status, RtiStatus::MaxIterations, "{limit}: {info:?}");
+        went_back += u32::from(info.watchdog_returned);
+        assert_eq!(s.state(0).unwrap(), &SVector::from(X0));
+        for k in 0..N {
+            assert!(s.control(k).unwrap().iter().all(|v| v.is_finite()));
+            assert!(s.state(k + 1).unwrap().iter().all(|v| v.is_finite()));
+        }
+    }
+    assert!(went_back > 0, "the watchdog never went back");
 }
