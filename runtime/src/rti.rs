@@ -39,7 +39,8 @@ pub struct RtiSettings<T> {
     /// the KKT conditions to this tolerance with the last QP's dynamics multipliers `pi`:
     /// every dynamics defect and, per entry of each state and control, the Lagrangian's
     /// gradient projected on the bounds (its natural residual, which holds the bounds'
-    /// violation too) at most this, as CasADi's `sqpmethod` stops on `tol_pr` and `tol_du`.
+    /// violation too) at most this, as CasADi's `sqpmethod` stops on `tol_pr` and `tol_du`
+    /// (absolute, as theirs: scale it with the cost's weights).
     /// Checked where no general constraint has a bound (their multipliers are not kept);
     /// 0 turns it off. Default [`Real::SQP_TOL`].
     pub sqp_kkt_tol: T,
