@@ -46,6 +46,9 @@ fn swing_up(hessian_scale: f64, exact: bool) -> Box<Solver> {
 
 const X0: [f64; 2] = [0.0, 0.0];
 
+/// The speed cap of [`the_kkt_exit_holds_with_active_state_bounds`].
+const OMEGA_CAP: f64 = 4.0;
+
 /// The largest difference of two solvers' trajectories (states and controls).
 fn distance(a: &Solver, b: &Solver) -> f64 {
     let mut d = (a.state(N).unwrap() - b.state(N).unwrap()).amax();
@@ -350,4 +353,56 @@ fn solves_cut_off_by_the_iteration_limit_end_on_a_finite_plan() {
         }
     }
     assert!(went_back > 0, "the watchdog never went back");
+}
+
+/// The KKT exit with state bounds that hold at the solution (the swing's speed capped): the
+/// natural residual of a state entry at its bound is its distance to it where the gradient
+/// pushes against it. Each solve of a closed loop lands within 1e-6 of one converged to
+/// 1e-10 by the step test alone, with no more QPs than the step test's.
+#[test]
+fn the_kkt_exit_holds_with_active_state_bounds() {
+    let cap = OMEGA_CAP;
+    let capped = |kkt: f64, tol: f64| {
+        let mut s = swing_up(1.0, true);
+        s.set_bounds(
+            &SVector::from([f64::NEG_INFINITY, -cap]),
+            &SVector::from([f64::INFINITY, cap]),
+            &SVector::from([-2.0]),
+            &SVector::from([2.0]),
+        )
+        .unwrap();
+        s.settings.sqp_max_iter = 300;
+        s.settings.sqp_kkt_tol = kkt;
+        s.settings.sqp_tol = tol;
+        s
+    };
+    let mut kkt = capped(1e-6, 1e-6);
+    let mut step_only = capped(0.0, 1e-6);
+    let mut reference = capped(0.0, 1e-10);
+    let (mut with_kkt, mut without, mut at_cap) = (0, 0, 0);
+    let mut x = SVector::from(X0);
+    for step in 0..6 {
+        let k = kkt.solve_sqp(&x);
+        let s = step_only.solve_sqp(&x);
+        let r = reference.solve_sqp(&x);
+        for info in [k, s, r] {
+            assert_eq!(info.status, RtiStatus::Ok, "step {step}: {info:?}");
+        }
+        assert!(
+            k.sqp_iterations <= s.sqp_iterations,
+            "step {step}: {k:?} vs {s:?}"
+        );
+        (with_kkt, without) = (with_kkt + k.sqp_iterations, without + s.sqp_iterations);
+        let d = distance(&kkt, &reference);
+        assert!(d <= 1e-6, "step {step}: {d} from the reference");
+        at_cap += (1..=N)
+            .filter(|&j| kkt.state(j).unwrap()[1].abs() >= cap - 1e-6)
+            .count();
+        x = kkt.state(1).unwrap() + SVector::from([0.01, -0.01]);
+    }
+    eprintln!(
+        "capped speed: {with_kkt} QPs with the KKT exit, {without} without; {at_cap} states at the cap"
+    );
+    assert!(at_cap > 0, "no state at its bound");
+    assert!(with_kkt < without, "{with_kkt} vs {without}");
 }
