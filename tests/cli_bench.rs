@@ -87,7 +87,7 @@ fn converged_sqp_closed_loop_matches_casadi() {
         }
         // Measured: A 2.65 against 7.77, B 2.54 against 5.88. CasADi's exact-Hessian SQP
         // took 2.69 on A (the anchors' report): the KKT exit and the watchdog's whole Newton
-        // steps (from the hover guess, the first step of A converges in 7 QPs instead of 32)
+        // steps (from the hover guess, the first step of A converges in 7 QPs instead of 30)
         // bring ours under 3.
         assert!(
             iterations[0] * 1.5 < iterations[1],
@@ -105,7 +105,7 @@ fn converged_sqp_closed_loop_matches_casadi() {
 
 /// Without the watchdog (`--sqp-watchdog 0`: a monotone line search at every step) the
 /// exact-Hessian SQP flies the same converged closed loop, CasADi's, but its first step
-/// crawls: the most iterations in a step, measured 32 against the watchdog's 7 on A
+/// crawls: the most iterations in a step, measured 30 against the watchdog's 7 on A
 /// (13 against 8 on B).
 #[test]
 fn the_watchdog_changes_the_iterations_not_the_closed_loop() {

@@ -767,9 +767,7 @@ impl<
         let qp_info = self.solver.solve_prepared(&self.qp);
         if qp_info.status == QpStatus::Solved && self.step_is_finite() {
             self.apply_step(T::ONE);
-            if let Some(x) = self.x.first_mut() {
-                *x = *x0;
-            }
+            self.pin_x0(x0);
             self.plan = self.u;
             self.plan_age = 0;
             self.pending_shift = true;
@@ -1040,10 +1038,7 @@ impl<
             if it > 0 && kkt_tol > T::ZERO && self.kkt_residual().is_some_and(|r| r <= kkt_tol) {
                 self.plan = self.u;
                 self.plan_age = 0;
-                return RtiInfo {
-                    watchdog_returned: returned,
-                    ..self.info(RtiStatus::Ok, last, it)
-                };
+                return self.sqp_info(RtiStatus::Ok, last, it, returned);
             }
             // A Newton step: the QP's Hessian is the Lagrangian's (`curved`: with the
             // dynamics' curvature added, not zero).
@@ -1066,10 +1061,7 @@ impl<
                 last = self.solve_sqp_qp(&mut loose, &loose_settings, &tight);
             }
             if last.status != QpStatus::Solved || !self.step_is_finite() {
-                return RtiInfo {
-                    watchdog_returned: returned,
-                    ..self.info(RtiStatus::UsedPreviousPlan, last, it + 1)
-                };
+                return self.sqp_info(RtiStatus::UsedPreviousPlan, last, it + 1, returned);
             }
             let sol = self.solver.solution();
             let mut step = sol.xn.amax();
@@ -1079,21 +1071,14 @@ impl<
                 nu = nu.max(sol.pi[k].amax() * T::lit(2.0));
             }
             // The first state is pinned to x0 exactly; the line search moves the rest.
-            if let Some(x) = self.x.first_mut() {
-                *x = *x0;
-            }
+            self.pin_x0(x0);
             if step <= self.settings.sqp_tol {
                 // Converged: the step is below the tolerance; taken whole, without a search.
                 self.apply_step(T::ONE);
-                if let Some(x) = self.x.first_mut() {
-                    *x = *x0;
-                }
+                self.pin_x0(x0);
                 self.plan = self.u;
                 self.plan_age = 0;
-                return RtiInfo {
-                    watchdog_returned: returned,
-                    ..self.info(RtiStatus::Ok, last, it + 1)
-                };
+                return self.sqp_info(RtiStatus::Ok, last, it + 1, returned);
             }
             // The merit's parts at the current iterate: those of the step accepted last (the
             // pinned first state has not moved since), else evaluated.
@@ -1114,12 +1099,10 @@ impl<
                 // gets there, the iteration goes back to the reference and searches
                 // monotonically from there on. Newton's whole steps converge where the
                 // monotone search crawls: from the hover guess, QR-bench A's first step takes
-                // 32 iterations with it (most of them short steps), 7 with the watchdog
+                // 30 iterations with it (most of them short steps), 7 with the watchdog
                 // (`mpcc bench --sqp [--sqp-watchdog 0]`: the most iterations in a step).
                 self.apply_step(T::ONE);
-                if let Some(x) = self.x.first_mut() {
-                    *x = *x0;
-                }
+                self.pin_x0(x0);
                 let parts = self.merit_parts();
                 let phi = parts.0 + nu * parts.1;
                 let (reference, phi_ref) = match watch {
@@ -1174,14 +1157,12 @@ impl<
             for _ in 0..MAX_HALVINGS {
                 self.restore_trial();
                 self.apply_step(alpha);
-                if let Some(x) = self.x.first_mut() {
-                    *x = *x0;
-                }
+                self.pin_x0(x0);
                 let parts = self.merit_parts();
                 let phi = parts.0 + nu * parts.1;
                 if phi.finite() && phi < best.1 {
                     best = (alpha, phi, parts);
-                    if curved {
+                    if newton {
                         break;
                     }
                 } else if best.0 > T::ZERO {
@@ -1214,9 +1195,7 @@ impl<
             };
             self.restore_trial();
             self.apply_step(alpha);
-            if let Some(x) = self.x.first_mut() {
-                *x = *x0;
-            }
+            self.pin_x0(x0);
         }
         if watch.is_some() {
             // Steps still watched at the limit (their QPs were not Newton's, so the watchdog
@@ -1224,9 +1203,32 @@ impl<
             returned = true;
             self.restore_reference(x0);
         }
+        self.sqp_info(
+            RtiStatus::MaxIterations,
+            last,
+            self.settings.sqp_max_iter,
+            returned,
+        )
+    }
+
+    /// `x_0 = x0`: the trajectory's first state is the measured one.
+    fn pin_x0(&mut self, x0: &SVector<T, NX>) {
+        if let Some(x) = self.x.first_mut() {
+            *x = *x0;
+        }
+    }
+
+    /// The outcome of a full SQP solve ([`solve_sqp`](Self::solve_sqp)).
+    fn sqp_info(
+        &self,
+        status: RtiStatus,
+        qp: QpInfo<T>,
+        sqp_iterations: u32,
+        watchdog_returned: bool,
+    ) -> RtiInfo<T> {
         RtiInfo {
-            watchdog_returned: returned,
-            ..self.info(RtiStatus::MaxIterations, last, self.settings.sqp_max_iter)
+            watchdog_returned,
+            ..self.info(status, qp, sqp_iterations)
         }
     }
 
@@ -1240,9 +1242,7 @@ impl<
             *u = *w;
         }
         self.xn = self.xnw;
-        if let Some(x) = self.x.first_mut() {
-            *x = *x0;
-        }
+        self.pin_x0(x0);
     }
 }
 
