@@ -105,13 +105,19 @@ fn build_reports_errors_with_file_line_and_column() {
     assert!(!ok && err.contains("no/such.mpc"), "{err}");
 }
 
-/// `--qp-method` reaches the generated solver: `condensed` gives QR-bench B condensing storage
-/// and asks for it, `riccati` takes A's away; a bad value is refused with the choices.
+/// `--qp-method` reaches the generated solver: `condensed` gives QR-bench B and A condensing
+/// storage and asks for it, `riccati` gives none and asks for the recursion; a bad value is
+/// refused with the choices.
 #[test]
 fn build_qp_method_option() {
     let base = Path::new(env!("CARGO_TARGET_TMPDIR"));
-    for (variant, method, nc) in [(None, "condensed", "20"), (Some("A"), "riccati", "0")] {
-        let dir = base.join(format!("cli_build_qp_method_{method}"));
+    let cases = [
+        (None, "condensed", "20"),
+        (Some("A"), "condensed", "10"),
+        (Some("A"), "riccati", "0"),
+    ];
+    for (i, (variant, method, nc)) in cases.into_iter().enumerate() {
+        let dir = base.join(format!("cli_build_qp_method_{i}_{method}"));
         let _ = std::fs::remove_dir_all(&dir);
         let out = dir.to_str().unwrap();
         let mut args = vec![

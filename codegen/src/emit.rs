@@ -298,20 +298,20 @@ fn doc_lines(text: &str) -> TokenStream {
     quote!(#(#lines)*)
 }
 
-/// `NC` of the generated solver: `N` when it is to condense (see
-/// [`QpOptions::method`](crate::QpOptions::method)),
-/// `0` otherwise.
+/// `NC` of the generated solver: `N` when it is to condense, which it is only when asked
+/// ([`QpOptions::method`](crate::QpOptions::method) `Condensed`), `0` otherwise.
+///
+/// `Auto` gives the Riccati recursion: every generated solver's real-time iteration solves
+/// its QPs on the warm active set, so that a step costs one factorization whichever the
+/// method, and condensing's (`P_k` of the same recursion, the products that build the
+/// dense Hessian, and its Cholesky factorization) is the dearer (QR-bench A in
+/// `docs/codegen.md`). Condensing pays where the interior point does the work (the warm
+/// active set off), and gives the shorter feedback phase.
 fn condensing_storage(l: &Lowered, opts: &Options) -> usize {
-    let free = |lo: &[f64], hi: &[f64]| {
-        lo.iter().all(|v| *v == f64::NEG_INFINITY) && hi.iter().all(|v| *v == f64::INFINITY)
-    };
-    let condensable = free(&l.lbx, &l.ubx) && free(&l.lg, &l.ug) && free(&l.lgn, &l.ugn);
-    let wanted = match opts.qp.method.unwrap_or(QpMethod::Auto) {
-        QpMethod::Riccati => false,
-        QpMethod::Condensed => true,
-        QpMethod::Auto => condensable && mpc_runtime::condensing_pays(l.nx, l.nu, l.n),
-    };
-    if wanted { l.n } else { 0 }
+    match opts.qp.method.unwrap_or(QpMethod::Auto) {
+        QpMethod::Condensed => l.n,
+        QpMethod::Riccati | QpMethod::Auto => 0,
+    }
 }
 
 /// `NBX` (the states with a bound, as the runtime sees them: below `Real::INF` in

@@ -40,11 +40,14 @@ pub struct QpOptions {
     pub tol_comp: Option<f64>,
     /// Warm start from the previous step's multipliers (the runtime's RTI default is on).
     pub warm_start_dual: Option<bool>,
-    /// How the QPs are solved (`None`: [`QpMethod::Auto`]). `Auto` gives the solver
-    /// condensing storage (`NC = N`) when the model has no state bounds and no general
-    /// constraint with a finite bound, and [`mpc_runtime::condensing_pays`] for its
-    /// dimensions; the runtime then condenses every QP that allows it. `Condensed` always
-    /// gives it the storage and asks for condensing; `Riccati` gives none.
+    /// How the QPs are solved (`None`: [`QpMethod::Auto`]). `Auto` and `Riccati` give the
+    /// solver no condensing storage (`NC = 0`): with the warm active set of the real-time
+    /// iteration a step costs one factorization, and the Riccati recursion's is the cheaper
+    /// (condensing runs the same recursion for `P_k` and factorizes a dense Hessian on top).
+    /// `Condensed` gives it the storage (`NC = N`) and asks for condensing: the shorter
+    /// feedback phase, and fewer operations where the interior point does the work (the
+    /// warm active set off); a model with control bounds only then has no Riccati storage
+    /// (`NR = 0`), the smaller solver.
     pub method: Option<QpMethod>,
 }
 

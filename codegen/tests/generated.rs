@@ -75,6 +75,10 @@ fn checked_in() -> Vec<(&'static str, Option<&'static str>, Options, &'static st
             Options {
                 scalar: Scalar::F32,
                 crate_name: Some("quadrotor_rates_f32".into()),
+                qp: QpOptions {
+                    method: Some(QpMethod::Condensed),
+                    ..QpOptions::default()
+                },
                 ..base.clone()
             },
             "generated/quadrotor_rates_f32",
@@ -156,9 +160,8 @@ fn lib_rs(g: &GeneratedCrate) -> &str {
 }
 
 /// Condensing storage (`NC`) and the method setting follow `QpOptions::method` and the model:
-/// `Auto` gives QR-bench A (N = 10, control bounds only) the storage and B (N = 20, where the
-/// dense factorization would cost more) none, and the point-mass model (state bounds) none;
-/// `Condensed` forces it, `Riccati` removes it. The state-bound rows (`NBX`) are the states
+/// `Auto` gives no model the storage (QR-bench A, B, the point mass), as `Riccati` does;
+/// `Condensed` gives it (QR-bench A: then without Riccati storage). The state-bound rows (`NBX`) are the states
 /// with a bound in the model file (the point mass bounds its 3 accelerations), and a solver
 /// that condenses and has nothing but control bounds has no Riccati storage (`NR = 0`); the
 /// probe model's general constraints (its soft floor) keep it (`NR = N`) even condensed. The
@@ -170,7 +173,14 @@ fn condensing_storage_follows_the_method_and_the_model() {
     let rates = "models/quadrotor_rates.mpc";
     let (condensed, riccati) = (Some(QpMethod::Condensed), Some(QpMethod::Riccati));
     let cases = [
-        (rates, Some("A"), None, ["10", "0", "0", "1"], None),
+        (rates, Some("A"), None, ["0", "0", "10", "1"], None),
+        (
+            rates,
+            Some("A"),
+            condensed,
+            ["10", "0", "0", "1"],
+            Some("Condensed"),
+        ),
         (rates, None, None, ["0", "0", "20", "1"], None),
         (
             "models/paper_pointmass.mpc",
@@ -230,8 +240,9 @@ fn condensing_storage_follows_the_method_and_the_model() {
     }
 }
 
-/// The checked-in QR-bench A solver (f32) condenses its QPs, B (f64) solves them by the
-/// Riccati recursion; both reach the hover.
+/// The checked-in QR-bench A solver in f32 (generated with `--qp-method condensed`)
+/// condenses its QPs and reaches the hover; A in f64 and B (the generator's default) solve
+/// them by the Riccati recursion.
 #[test]
 fn generated_solvers_condense_where_the_generator_chose_to() {
     let x0 = quadrotor::X0;
@@ -250,6 +261,9 @@ fn generated_solvers_condense_where_the_generator_chose_to() {
     let mut b = Box::new(quadrotor_rates::Solver::new());
     b.prepare();
     assert!(!b.rti().condensed());
+    let mut a64 = Box::new(quadrotor_rates_a::Solver::new());
+    a64.prepare();
+    assert!(!a64.rti().condensed());
 }
 
 /// xorshift64*.

@@ -357,7 +357,9 @@ pub struct QpSettings<T> {
 /// Whether condensing a QP with these dimensions is estimated cheaper per interior-point
 /// iteration than the Riccati recursion: `(N NU)^3 / 6 <= N (2 NX^3 + 3 NX^2 NU)`
 /// multiply-adds (dense Cholesky against the recursion's products). The rule of
-/// [`QpMethod::Auto`]; the code generator gives a solver condensing storage by it.
+/// [`QpMethod::Auto`] in a solver with both storages. The code generator gives condensing
+/// storage only when asked (`mpcc build --qp-method condensed`): on the warm active set a
+/// step costs one factorization, and the recursion's is the cheaper.
 pub const fn condensing_pays(nx: usize, nu: usize, n: usize) -> bool {
     let (nx, nu, n) = (nx as u128, nu as u128, n as u128);
     let nz = n.saturating_mul(nu);
