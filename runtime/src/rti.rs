@@ -279,6 +279,20 @@ fn check_bounds<T: Real, const A: usize, const B: usize>(
     Ok(())
 }
 
+/// `W r` for a symmetric weight `W`, diagonal if `diag`: then a scaling of `r`'s entries.
+#[inline(always)]
+fn weighted<T: Real, const R: usize>(
+    w: &SMatrix<T, R, R>,
+    diag: bool,
+    r: &SVector<T, R>,
+) -> SVector<T, R> {
+    if diag {
+        SVector::from_fn(|i, _| w[(i, i)] * r[i])
+    } else {
+        mul(w, r)
+    }
+}
+
 /// `(W J)' = J'W` for a symmetric weight `W` (the solver keeps the symmetric part), diagonal
 /// if `diag`: then a scaling of `J`'s rows. Not inlined: its temporaries stay out of the frame
 /// of [`Rti::linearize`]'s loop, which runs the model's functions (on a Cortex-M4F that frame
@@ -687,13 +701,11 @@ impl<
             let mut jx = SMatrix::<T, NY, NX>::zeros();
             let mut ju = SMatrix::<T, NY, NU>::zeros();
             let r = self.model.residual(&x, &u, &p, &mut jx, &mut ju) - self.yref[k];
-            // (WJ)' (a diagonal W scales J's rows), then J'WJ as (WJ)'J: the Jacobian on the
-            // right, where its zeros are skipped (a residual that selects states and
-            // controls is mostly zeros), written into the stage's Hessian in place (below).
-            let wjxt = weighted_transpose(&self.w, self.w_diag, &jx);
-            let wjut = weighted_transpose(&self.w, self.w_diag, &ju);
-            s.gx = mul(&wjxt, &r);
-            s.gu = mul(&wjut, &r);
+            // The gradient J'(W r): `W r` first, then dot products down J's columns (no
+            // `(WJ)'`, which only J'WJ below needs).
+            let wr = weighted(&self.w, self.w_diag, &r);
+            s.gx = tr_mul(&jx, &wr);
+            s.gu = tr_mul(&ju, &wr);
             s.lbx = self.lbx - x;
             s.ubx = self.ubx - x;
             s.lbu = self.lbu - u;
@@ -705,6 +717,11 @@ impl<
             s.soft_l2 = self.l2;
             // One Hessian for all stages (`NH = 1`, constant Jacobians): stage 0's.
             if gn && (NH == N || k == 0) {
+                // (WJ)' (a diagonal W scales J's rows), then J'WJ as (WJ)'J: the Jacobian on
+                // the right, where its zeros are skipped (a residual that selects states and
+                // controls is mostly zeros), written into the stage's Hessian in place.
+                let wjxt = weighted_transpose(&self.w, self.w_diag, &jx);
+                let wjut = weighted_transpose(&self.w, self.w_diag, &ju);
                 let h = self.qp.h_mut(k);
                 mul_mostly_zero_into(&mut h.q, &wjxt, &jx);
                 mul_mostly_zero_into(&mut h.s, &wjut, &jx);
@@ -723,11 +740,11 @@ impl<
         let t = &mut self.qp.terminal;
         let mut jx = SMatrix::<T, NYN, NX>::zeros();
         let r = self.model.terminal_residual(&xn, &pn, &mut jx) - self.yref_n;
-        let wjxt = weighted_transpose(&self.wn, self.wn_diag, &jx);
         if gn {
+            let wjxt = weighted_transpose(&self.wn, self.wn_diag, &jx);
             mul_mostly_zero_into(&mut t.q, &wjxt, &jx);
         }
-        t.gx = mul(&wjxt, &r);
+        t.gx = tr_mul(&jx, &weighted(&self.wn, self.wn_diag, &r));
         t.lbx = self.lbx - xn;
         t.ubx = self.ubx - xn;
         let h = self.model.terminal_constraints(&xn, &pn, &mut t.c);

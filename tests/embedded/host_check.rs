@@ -161,6 +161,30 @@ fn parse(out: &str, machine: &str) -> Report {
         bytes("static") + bytes("stack"),
         "{machine}: {ram}"
     );
+    // The stack counted is the deepest of the marks printed (setup, the loop, step 0's
+    // prepare and feedback alone).
+    let marks = out
+        .lines()
+        .find_map(|l| l.strip_prefix("stack high-water: "))
+        .unwrap_or_else(|| panic!("{machine}: no stack high-water line:\n{out}"));
+    let mark = |key: &str| -> usize {
+        marks
+            .split(key)
+            .nth(1)
+            .and_then(|r| r.split_whitespace().next())
+            .and_then(|v| v.parse().ok())
+            .unwrap_or_else(|| panic!("{machine}: no {key:?} mark in {marks}"))
+    };
+    let deepest = ["setup=", "loop=", "(prepare ", "set_x0+feedback "]
+        .map(mark)
+        .into_iter()
+        .max()
+        .unwrap_or(0);
+    assert_eq!(
+        bytes("stack"),
+        deepest,
+        "{machine}: the RAM figure's stack is not the deepest mark: {marks} / {ram}"
+    );
     let mut iterations = Vec::new();
     for (k, line) in out.lines().filter(|l| l.starts_with("step ")).enumerate() {
         assert_eq!(

@@ -248,9 +248,15 @@ fn main() -> ! {
         stack_feedback,
         top - bottom
     );
-    // RAM in use: the static sections (.data, .bss) and the deeper of the two stack marks.
+    // RAM in use: the static sections (.data, .bss) and the deepest stack mark. The loop's
+    // mark starts after step 0's prepare (repainted there to measure set_x0 + feedback
+    // alone), so that prepare's own mark counts too: it is the deepest where a later
+    // prepare never goes as deep.
     let statics = (&raw const __ebss) as usize - (&raw const __sdata) as usize;
-    let stack = stack_setup.max(stack_loop);
+    let stack = stack_setup
+        .max(stack_loop)
+        .max(stack_prepare)
+        .max(stack_feedback);
     hprintln!(
         "ram: static={} B (.data+.bss), stack={} B, total={} B",
         statics,
