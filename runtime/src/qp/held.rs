@@ -368,6 +368,8 @@ fn held<const NU: usize, const N: usize>(
 
 #[cfg(test)]
 mod tests {
+    extern crate std;
+
     use super::*;
     use nalgebra::{SMatrix, SVector};
 
@@ -400,6 +402,93 @@ mod tests {
         let mut solver = QpSolver::<f64, 3, 2, 0, 0, 6>::NEW;
         assert!(solver.check_stages(&qp) && solver.load_bounds(&qp).is_ok());
         (qp, solver)
+    }
+
+    /// A QP of 6 stages (3 states, 2 controls) with control and state bounds and one general
+    /// row per stage and at the end, from the same kind of draws, and its solver loaded.
+    fn qp_with_rows() -> (OcpQp<f64, 3, 2, 1, 1, 6, 6>, QpSolver<f64, 3, 2, 1, 1, 6>) {
+        let (base, _) = qp_and_solver();
+        let mut qp = OcpQp::<f64, 3, 2, 1, 1, 6, 6>::NEW;
+        qp.hessians = base.hessians;
+        for (k, (s, b)) in qp.stages.iter_mut().zip(&base.stages).enumerate() {
+            let t = k as f64;
+            (s.a, s.b, s.f, s.gx, s.gu) = (b.a, b.b, b.f, b.gx, b.gu);
+            (s.lbu, s.ubu) = (b.lbu, b.ubu);
+            s.lbx = SVector::repeat(-0.05 - 0.01 * t);
+            s.ubx = SVector::repeat(0.4);
+            s.c = SMatrix::from_fn(|_, j| 0.5 - 0.3 * j as f64 + 0.1 * t);
+            s.d = SMatrix::from_fn(|_, j| 0.2 + 0.4 * j as f64);
+            s.lg = SVector::repeat(-0.1);
+            s.ug = SVector::repeat(0.05);
+        }
+        qp.x0 = SVector::from([0.3, -0.2, 0.1]);
+        qp.terminal.q = base.terminal.q;
+        qp.terminal.lbx = SVector::repeat(-0.05);
+        qp.terminal.ubx = SVector::repeat(0.1);
+        qp.terminal.c = SMatrix::from_fn(|_, j| 1.0 - 0.5 * j as f64);
+        qp.terminal.lg = SVector::repeat(-0.02);
+        qp.terminal.ug = SVector::repeat(0.02);
+        let mut solver = QpSolver::<f64, 3, 2, 1, 1, 6>::NEW;
+        assert!(solver.check_stages(&qp) && solver.load_bounds(&qp).is_ok());
+        (qp, solver)
+    }
+
+    /// `hold_rows` returns what the interior point's `residuals` and `stationarity` give with
+    /// the rows set as the module docs say (held bounds with the multipliers `max(+-mu, 0)`,
+    /// every other row free), bit for bit, and sets the rows so: on a QP with state bounds and
+    /// general rows, at a point on a held set that violates some of them and has held
+    /// multipliers of both signs.
+    #[test]
+    fn hold_rows_gives_the_interior_points_residuals_bit_for_bit() {
+        let (qp, mut fast) = qp_with_rows();
+        let (mut lower, mut upper) = ([[false; 2]; 6], [[false; 2]; 6]);
+        lower[1][0] = true;
+        upper[3][1] = true;
+        lower[4][1] = true;
+        let fixed = held(&lower, &upper);
+        assert!(fast.factorize(&qp, Newton::Held(&fixed)));
+        fast.sol = QpSolution::NEW;
+        fast.sol.x[0] = qp.x0;
+        for k in 0..6 {
+            for i in 0..2 {
+                if lower[k][i] {
+                    fast.sol.u[k][i] = fast.ru[k].lo[i];
+                } else if upper[k][i] {
+                    fast.sol.u[k][i] = fast.ru[k].hi[i];
+                }
+            }
+        }
+        fast.held_step(&qp, &fixed);
+        let mut slow = fast.clone();
+        let got = fast.hold_rows(&qp, &lower, &upper);
+        for k in 0..6 {
+            let (s, h) = (&qp.stages[k], qp.h(k));
+            let (x, u) = (slow.sol.x[k], slow.sol.u[k]);
+            let mu = mul(&h.r, &u) + mul(&h.s, &x) + s.gu + tr_mul(&s.b, &slow.sol.pi[k]);
+            slow.ru[k].hold(&u, &mu, &lower[k], &upper[k]);
+            slow.rx[k].hold_free(&x);
+            slow.rg[k].hold_free(&(mul(&s.c, &x) + mul(&s.d, &u)));
+        }
+        let xn = slow.sol.xn;
+        slow.rxn.hold_free(&xn);
+        slow.rgn.hold_free(&mul(&qp.terminal.c, &xn));
+        let mut want = slow.residuals(&qp);
+        want[0] = slow.stationarity(&qp);
+        want[3] = 0.0;
+        assert_eq!(got, want);
+        // Not a trivial point: a stationarity residual (the held set is not this QP's) and
+        // rows violated.
+        assert!(got[0] > 1e-3 && got[1] >= 0.0 && got[2] > 1e-3, "{got:?}");
+        // The rows as set, their residuals included: every field the same.
+        let same = |a: &dyn core::fmt::Debug, b: &dyn core::fmt::Debug| {
+            std::format!("{a:?}") == std::format!("{b:?}")
+        };
+        for k in 0..6 {
+            assert!(same(&fast.ru[k], &slow.ru[k]), "stage {k}");
+            assert!(same(&fast.rx[k], &slow.rx[k]), "stage {k}");
+            assert!(same(&fast.rg[k], &slow.rg[k]), "stage {k}");
+        }
+        assert!(same(&fast.rxn, &slow.rxn) && same(&fast.rgn, &slow.rgn));
     }
 
     /// After a move of the held set, the stages above the last changed one keep their
