@@ -282,8 +282,8 @@ struct BuildArgs {
     qp_tol: Option<f64>,
     /// How the QPs are solved: `auto` and `riccati` by the Riccati recursion (the cheaper
     /// step with the warm active set), `condensed` condensed (a dense QP in the controls)
-    /// whenever the QP allows it: the shorter feedback, and with control bounds only the
-    /// smaller solver.
+    /// whenever the QP allows it: the shorter feedback, and for short horizons with control
+    /// bounds only the smaller solver.
     #[arg(long, value_enum, default_value_t = QpMethodArg::Auto)]
     qp_method: QpMethodArg,
     /// Path of the mpc-runtime crate as written into the generated Cargo.toml, relative to

@@ -43,10 +43,12 @@ pub struct QpOptions {
     /// How the QPs are solved (`None`: [`QpMethod::Auto`]). `Auto` and `Riccati` give the
     /// solver no condensing storage (`NC = 0`): with the warm active set of the real-time
     /// iteration a step costs one factorization, and the Riccati recursion's is the cheaper
-    /// (condensing runs the same recursion for `P_k` and factorizes a dense Hessian on top).
+    /// (condensing runs a recursion of about the same cost for `P_k` and factorizes a dense
+    /// Hessian on top).
     /// `Condensed` gives it the storage (`NC = N`) and asks for condensing: the shorter
-    /// feedback phase, and fewer operations where the interior point does the work (the
-    /// warm active set off); a model with control bounds only then has no Riccati storage
+    /// feedback phase; for short horizons (QR-bench A; [`mpc_runtime::condensing_pays`])
+    /// fewer operations where the interior point does the work (the warm active set off),
+    /// and, for a model with control bounds only, which then has no Riccati storage
     /// (`NR = 0`), the smaller solver.
     pub method: Option<QpMethod>,
 }

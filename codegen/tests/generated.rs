@@ -159,9 +159,10 @@ fn lib_rs(g: &GeneratedCrate) -> &str {
         .expect("a src/lib.rs")
 }
 
-/// Condensing storage (`NC`) and the method setting follow `QpOptions::method` and the model:
-/// `Auto` gives no model the storage (QR-bench A, B, the point mass), as `Riccati` does;
-/// `Condensed` gives it (QR-bench A: then without Riccati storage). The state-bound rows (`NBX`) are the states
+/// Condensing storage (`NC`) and the method setting follow `QpOptions::method` (`NBX`, `NR`
+/// and `NH` the model too): `Auto` gives no model the storage (QR-bench A, B, the point
+/// mass), as `Riccati` does; `Condensed` gives it (QR-bench A: then without Riccati storage).
+/// The state-bound rows (`NBX`) are the states
 /// with a bound in the model file (the point mass bounds its 3 accelerations), and a solver
 /// that condenses and has nothing but control bounds has no Riccati storage (`NR = 0`); the
 /// probe model's general constraints (its soft floor) keep it (`NR = N`) even condensed. The
@@ -244,7 +245,7 @@ fn condensing_storage_follows_the_method_and_the_model() {
 /// condenses its QPs and reaches the hover; A in f64 and B (the generator's default) solve
 /// them by the Riccati recursion.
 #[test]
-fn generated_solvers_condense_where_the_generator_chose_to() {
+fn checked_in_solvers_solve_by_the_method_they_were_generated_with() {
     let x0 = quadrotor::X0;
     let mut a = Box::new(quadrotor_rates_f32::Solver::new());
     let mut x = SVector::from(x0);

@@ -435,18 +435,52 @@ mod tests {
 
     /// `hold_rows` returns what the interior point's `residuals` and `stationarity` give with
     /// the rows set as the module docs say (held bounds with the multipliers `max(+-mu, 0)`,
-    /// every other row free), bit for bit, and sets the rows so: on a QP with state bounds and
-    /// general rows, at a point on a held set that violates some of them and has held
-    /// multipliers of both signs.
+    /// every other row free), bit for bit, sets the rows so and leaves the same scratch: on
+    /// a QP with state bounds and general rows, at a point on a held set that violates some
+    /// of them and holds a bound whose multiplier has the wrong sign. The QP's gradients and
+    /// terminal weight are scaled in turn, so that the stationarity's scale (the largest of
+    /// its terms, at least 1) comes from more than one term.
     #[test]
     fn hold_rows_gives_the_interior_points_residuals_bit_for_bit() {
-        let (qp, mut fast) = qp_with_rows();
+        let cases: [(f64, f64, f64, f64); 5] = [
+            (8.0, 8.0, 1.0, 1.0),
+            (1.0, 1e3, 1.0, 1.0),
+            (1e3, 1.0, 1.0, 1.0),
+            (1.0, 1.0, 1e3, 1.0),
+            (1.0, 1.0, 1.0, 1e3),
+        ];
+        let mut scales = std::vec::Vec::new();
+        for (sgx, sgu, sq, sgn) in cases {
+            let (mut qp, _) = qp_with_rows();
+            for s in qp.stages.iter_mut() {
+                s.gx *= sgx;
+                s.gu *= sgu;
+            }
+            qp.terminal.q *= sq;
+            qp.terminal.gx = SVector::from([0.2, -0.1, 0.3]) * sgn;
+            scales.push(hold_rows_matches_at_a_missed_set(&qp));
+        }
+        // The stationarity's scale was above 1 in every case, set by more than one term
+        // (`A'pi` and the terminal `H y + g`: in a solution on a held set the multipliers and
+        // gradients grow together, so no case isolates each term).
+        assert!(!scales.contains(&7), "{scales:?}");
+        scales.sort_unstable();
+        scales.dedup();
+        assert!(scales.len() >= 2, "{scales:?}");
+    }
+
+    /// The check of [`hold_rows_gives_the_interior_points_residuals_bit_for_bit`] on one QP;
+    /// returns which term set the stationarity's scale (0: `hu`, 1: `B'pi`, 2: `hx`, 3:
+    /// `A'pi`, 4: `pi_{k-1}`, 5: `hxn`, 6: the last `pi`, 7: none above 1).
+    fn hold_rows_matches_at_a_missed_set(qp: &OcpQp<f64, 3, 2, 1, 1, 6, 6>) -> u8 {
+        let mut fast = QpSolver::<f64, 3, 2, 1, 1, 6>::NEW;
+        assert!(fast.check_stages(qp) && fast.load_bounds(qp).is_ok());
         let (mut lower, mut upper) = ([[false; 2]; 6], [[false; 2]; 6]);
         lower[1][0] = true;
         upper[3][1] = true;
         lower[4][1] = true;
         let fixed = held(&lower, &upper);
-        assert!(fast.factorize(&qp, Newton::Held(&fixed)));
+        assert!(fast.factorize(qp, Newton::Held(&fixed)));
         fast.sol = QpSolution::NEW;
         fast.sol.x[0] = qp.x0;
         for k in 0..6 {
@@ -458,27 +492,32 @@ mod tests {
                 }
             }
         }
-        fast.held_step(&qp, &fixed);
+        fast.held_step(qp, &fixed);
         let mut slow = fast.clone();
-        let got = fast.hold_rows(&qp, &lower, &upper);
+        let got = fast.hold_rows(qp, &lower, &upper);
+        let mut terms = [0.0f64; 8];
+        terms[7] = 1.0;
         for k in 0..6 {
             let (s, h) = (&qp.stages[k], qp.h(k));
             let (x, u) = (slow.sol.x[k], slow.sol.u[k]);
-            let mu = mul(&h.r, &u) + mul(&h.s, &x) + s.gu + tr_mul(&s.b, &slow.sol.pi[k]);
+            let bpi = tr_mul(&s.b, &slow.sol.pi[k]);
+            let mu = mul(&h.r, &u) + mul(&h.s, &x) + s.gu + bpi;
             slow.ru[k].hold(&u, &mu, &lower[k], &upper[k]);
             slow.rx[k].hold_free(&x);
             slow.rg[k].hold_free(&(mul(&s.c, &x) + mul(&s.d, &u)));
+            terms[1] = terms[1].max(bpi.amax());
+            if k > 0 {
+                terms[3] = terms[3].max(tr_mul(&s.a, &slow.sol.pi[k]).amax());
+                terms[4] = terms[4].max(slow.sol.pi[k - 1].amax());
+            }
         }
         let xn = slow.sol.xn;
         slow.rxn.hold_free(&xn);
         slow.rgn.hold_free(&mul(&qp.terminal.c, &xn));
-        let mut want = slow.residuals(&qp);
-        want[0] = slow.stationarity(&qp);
+        let mut want = slow.residuals(qp);
+        want[0] = slow.stationarity(qp);
         want[3] = 0.0;
         assert_eq!(got, want);
-        // Not a trivial point: a stationarity residual (the held set is not this QP's) and
-        // rows violated.
-        assert!(got[0] > 1e-3 && got[1] >= 0.0 && got[2] > 1e-3, "{got:?}");
         // The rows as set, their residuals included: every field the same.
         let same = |a: &dyn core::fmt::Debug, b: &dyn core::fmt::Debug| {
             std::format!("{a:?}") == std::format!("{b:?}")
@@ -489,6 +528,29 @@ mod tests {
             assert!(same(&fast.rg[k], &slow.rg[k]), "stage {k}");
         }
         assert!(same(&fast.rxn, &slow.rxn) && same(&fast.rgn, &slow.rgn));
+        // The same scratch: dynamics residuals, `H y + g` (no state's at stage 0), no soft
+        // terms.
+        assert_eq!(fast.rb, slow.rb);
+        assert_eq!(fast.hu, slow.hu);
+        assert_eq!(fast.hx[1..], slow.hx[1..]);
+        assert_eq!((fast.hxn, fast.soft_stat), (slow.hxn, slow.soft_stat));
+        // Not a trivial point: rows violated and a held multiplier of the wrong sign.
+        assert!(got[0] > 1e-6 && got[2] > 1e-3, "{got:?}");
+        let mu = |k: usize| {
+            let (s, h) = (&qp.stages[k], qp.h(k));
+            let (x, u) = (fast.sol.x[k], fast.sol.u[k]);
+            mul(&h.r, &u) + mul(&h.s, &x) + s.gu + tr_mul(&s.b, &fast.sol.pi[k])
+        };
+        let wrong = (0..6).any(|k| {
+            (0..2).any(|i| (lower[k][i] && mu(k)[i] < 0.0) || (upper[k][i] && mu(k)[i] > 0.0))
+        });
+        assert!(wrong);
+        terms[0] = fast.hu.iter().fold(0.0, |m, v| m.max(v.amax()));
+        terms[2] = fast.hx[1..].iter().fold(0.0, |m, v| m.max(v.amax()));
+        terms[5] = fast.hxn.amax();
+        terms[6] = fast.sol.pi[5].amax();
+        let top = terms.iter().cloned().fold(0.0, f64::max);
+        terms.iter().position(|&t| t == top).unwrap_or(7) as u8
     }
 
     /// After a move of the held set, the stages above the last changed one keep their
