@@ -87,11 +87,16 @@ impl<
             *x = qp.x0;
         }
         let mut solves = 0;
+        // The sets of a point whose rows were not set (its set plainly missed, below): set
+        // them if the solve ends there, for the interior point's warm start.
+        let mut unset: Option<Sets<NU, N>> = None;
         for round in 0..=ITERATIONS {
             // Each round after the first moves the set and factorizes it.
             if round > 0 {
                 let before = held(&lower, &upper);
+                let sets = (lower, upper);
                 if !self.move_held_set(qp, &mut lower, &mut upper) {
+                    self.set_rows_if(qp, unset);
                     return Err(solves);
                 }
                 self.store_active_set(&lower, &upper);
@@ -104,6 +109,7 @@ impl<
                     .map_or(0, |k| k + 1);
                 if !self.factorize_stages(qp, Newton::Held(&now), stages) {
                     self.act_valid = false;
+                    self.set_rows_if(qp, unset.map(|_| sets));
                     return Err(solves);
                 }
             }
@@ -124,6 +130,14 @@ impl<
                 for _ in 0..steps {
                     self.held_step(qp, &fixed);
                 }
+                // A free control past its bound by more than the retry's margin: the
+                // residuals would miss by more than it too (the inequality residual is at
+                // least that), and the set moves; they are not computed.
+                if self.free_violation(&lower, &upper) > self.settings.tol_ineq * T::lit(1e4) {
+                    unset = Some((lower, upper));
+                    break;
+                }
+                unset = None;
                 let res = self.hold_rows(qp, &lower, &upper);
                 let st = &self.settings;
                 let within = |f: T| {
@@ -155,7 +169,39 @@ impl<
                 steps = 1;
             }
         }
+        self.set_rows_if(qp, unset);
         Err(solves)
+    }
+
+    /// The largest violation of a bound by a control that `lower` / `upper` leave free.
+    fn free_violation(&self, lower: &[[bool; NU]; N], upper: &[[bool; NU]; N]) -> T {
+        let mut m = T::ZERO;
+        for (k, (u, r)) in self.sol.u.iter().zip(&self.ru).enumerate() {
+            for i in 0..NU {
+                if lower[k][i] || upper[k][i] {
+                    continue;
+                }
+                if r.has_lo[i] {
+                    m = m.max(r.lo[i] - u[i]);
+                }
+                if r.has_hi[i] {
+                    m = m.max(u[i] - r.hi[i]);
+                }
+            }
+        }
+        m
+    }
+
+    /// Sets the rows at the current point on `sets` (as [`hold_rows`](Self::hold_rows)), if
+    /// given.
+    fn set_rows_if<const NH: usize>(
+        &mut self,
+        qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>,
+        sets: Option<Sets<NU, N>>,
+    ) {
+        if let Some((lower, upper)) = sets {
+            self.hold_rows(qp, &lower, &upper);
+        }
     }
 
     /// A primal-dual active-set move from the current point on the held set: a held control
@@ -351,6 +397,9 @@ impl<
         self.store_active_set(&lower, &upper);
     }
 }
+
+/// A held set: the controls held on their lower bounds, and on their upper ones.
+type Sets<const NU: usize, const N: usize> = ([[bool; NU]; N], [[bool; NU]; N]);
 
 /// The held entries: on either bound.
 fn held<const NU: usize, const N: usize>(
