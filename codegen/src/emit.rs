@@ -304,9 +304,9 @@ fn doc_lines(text: &str) -> TokenStream {
 /// `Auto` gives the Riccati recursion: every generated solver's real-time iteration solves
 /// its QPs on the warm active set, so that a step costs one factorization whichever the
 /// method, and condensing's (a backward recursion of about the same cost for `P_k`, the
-/// products that build the dense Hessian, and its Cholesky factorization) is the dearer (QR-bench A in
-/// `docs/codegen.md`). Condensing pays where the interior point does the work (the warm
-/// active set off), and gives the shorter feedback phase.
+/// products that build the dense Hessian, and its Cholesky factorization) is the dearer
+/// (QR-bench A in `docs/codegen.md`). Condensing pays where the interior point does the
+/// work (the warm active set off), and gives the shorter feedback phase.
 fn condensing_storage(l: &Lowered, opts: &Options) -> usize {
     match opts.qp.method.unwrap_or(QpMethod::Auto) {
         QpMethod::Condensed => l.n,
