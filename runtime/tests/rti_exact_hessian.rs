@@ -240,24 +240,12 @@ fn the_kkt_exit_saves_the_confirming_qp_and_lands_on_the_same_solution() {
         let (mut with_kkt, mut without) = (0, 0);
         let mut x = SVector::from(X1);
         for step in 0..6 {
-            let k = kkt.solve_sqp(&x);
-            let s = step_only.solve_sqp(&x);
-            let r = reference.solve_sqp(&x);
-            for info in [k, s, r] {
-                assert_eq!(info.status, RtiStatus::Ok, "step {step}: {info:?}");
-            }
-            assert!(
-                k.sqp_iterations <= s.sqp_iterations,
-                "step {step}, exact {exact}: {} iterations with the KKT exit, {} without",
-                k.sqp_iterations,
-                s.sqp_iterations
+            let (k, s) = kkt_step(
+                [&mut kkt, &mut step_only, &mut reference],
+                &x,
+                &format!("step {step}, exact {exact}"),
             );
-            (with_kkt, without) = (with_kkt + k.sqp_iterations, without + s.sqp_iterations);
-            let d = distance(&kkt, &reference);
-            assert!(
-                d <= 1e-6,
-                "step {step}, exact {exact}: {d} from the reference"
-            );
+            (with_kkt, without) = (with_kkt + k, without + s);
             let at_bound = (0..N).filter(|&j| kkt.control(j).unwrap()[0].abs() >= 2.0 - 1e-6);
             assert!(
                 at_bound.count() >= 1,
@@ -277,6 +265,29 @@ fn the_kkt_exit_saves_the_confirming_qp_and_lands_on_the_same_solution() {
             assert!(with_kkt < without, "{with_kkt} vs {without}");
         }
     }
+}
+
+/// One closed-loop step of the KKT-exit tests: the solver with the exit, the one with the
+/// step test alone and the reference (to 1e-10) each solve from `x`; every solve ends `Ok`,
+/// the exit takes no more iterations than the step test, and its solution is within 1e-6 of
+/// the reference's. Returns the iterations with the exit and without it.
+fn kkt_step(solvers: [&mut Solver; 3], x: &SVector<f64, 2>, at: &str) -> (u32, u32) {
+    let [kkt, step_only, reference] = solvers;
+    let k = kkt.solve_sqp(x);
+    let s = step_only.solve_sqp(x);
+    let r = reference.solve_sqp(x);
+    for info in [k, s, r] {
+        assert_eq!(info.status, RtiStatus::Ok, "{at}: {info:?}");
+    }
+    assert!(
+        k.sqp_iterations <= s.sqp_iterations,
+        "{at}: {} iterations with the KKT exit, {} without",
+        k.sqp_iterations,
+        s.sqp_iterations
+    );
+    let d = distance(kkt, reference);
+    assert!(d <= 1e-6, "{at}: {d} from the reference");
+    (k.sqp_iterations, s.sqp_iterations)
 }
 
 /// From the cold start, the watchdog (`sqp_watchdog`, default 4) takes Newton's steps whole
@@ -387,19 +398,12 @@ fn the_kkt_exit_holds_with_active_state_bounds() {
     let (mut with_kkt, mut without, mut at_cap) = (0, 0, 0);
     let mut x = SVector::from(X0);
     for step in 0..6 {
-        let k = kkt.solve_sqp(&x);
-        let s = step_only.solve_sqp(&x);
-        let r = reference.solve_sqp(&x);
-        for info in [k, s, r] {
-            assert_eq!(info.status, RtiStatus::Ok, "step {step}: {info:?}");
-        }
-        assert!(
-            k.sqp_iterations <= s.sqp_iterations,
-            "step {step}: {k:?} vs {s:?}"
+        let (k, s) = kkt_step(
+            [&mut kkt, &mut step_only, &mut reference],
+            &x,
+            &format!("step {step}"),
         );
-        (with_kkt, without) = (with_kkt + k.sqp_iterations, without + s.sqp_iterations);
-        let d = distance(&kkt, &reference);
-        assert!(d <= 1e-6, "step {step}: {d} from the reference");
+        (with_kkt, without) = (with_kkt + k, without + s);
         at_cap += (1..=N)
             .filter(|&j| kkt.state(j).unwrap()[1].abs() >= cap - 1e-6)
             .count();
