@@ -36,7 +36,9 @@
 //! iterative refinement) is a step on `F`, then the same correction. Up to 8 bounds are
 //! held so in one solve, while their passes cost less than refactorizing the stages up to
 //! the last one that changed (one stage's factorization counted as 10 stages of passes;
-//! about 15 in callgrind on QR-bench); a move that frees a bound refactorizes.
+//! about 15 in callgrind on QR-bench). A move may also free bounds held so: their forces,
+//! `-mu` from the controls' stationarity, are cancelled by one more pair of passes before
+//! the correction. A move that frees a bound the factorization holds refactorizes.
 //!
 //! The set is taken from each interior-point solution (the control bounds whose multiplier
 //! exceeds their slack) only when no other row is active and the QP has no soft row;
@@ -224,12 +226,14 @@ impl<
         Err(solves)
     }
 
-    /// Holds the bounds a move adds through the Schur complement (module docs), on top of
-    /// the factorized set `fixed` and the bounds `cols` already holds so (together the set
-    /// `before`): when the move to `now` only adds bounds, no more than [`COLUMNS`] in all,
-    /// and their unit responses cost less than refactorizing the stages up to the last one
-    /// that changed. Computes the new entries of `M` and its factor. Returns whether it did
-    /// (`cols` is unchanged otherwise).
+    /// Takes a move through the Schur complement (module docs), on top of the factorized set
+    /// `fixed` and the bounds `cols` already holds so (together the set `before`): when the
+    /// move to `now` frees none of `fixed`'s bounds, holds no more than [`COLUMNS`] so in
+    /// all, and its passes cost less than refactorizing the stages up to the last one that
+    /// changed. The bounds it adds get their unit responses (`M`'s new entries); the columns
+    /// it frees are released, their forces (`-mu`, from the controls' stationarity at the
+    /// current point) cancelled by one more pair of passes, and dropped from `M`; `-M` is
+    /// factorized. Returns whether it did (`cols` and the point are unchanged otherwise).
     fn hold_by_columns<const NH: usize>(
         &mut self,
         qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>,
@@ -238,11 +242,26 @@ impl<
         now: &[[bool; NU]; N],
         cols: &mut Columns<T>,
     ) -> bool {
-        let mut next = cols.clone();
+        // The columns that stay, in order, then the added ones.
+        let mut next = Columns::new();
+        let mut kept = [0usize; COLUMNS];
+        let mut released = None;
+        for (j, &(k, i)) in cols.at.iter().enumerate().take(cols.n) {
+            if now[k][i] {
+                if let (Some(at), Some(slot)) = (next.at.get_mut(next.n), kept.get_mut(next.n)) {
+                    (*at, *slot) = ((k, i), j);
+                }
+                next.n += 1;
+                next.top = next.top.max(k);
+            } else {
+                released = Some(released.map_or(k, |t: usize| t.max(k)));
+            }
+        }
+        let stay = next.n;
         let mut changed = 0;
         for k in 0..N {
             for i in 0..NU {
-                if before[k][i] && !now[k][i] {
+                if fixed[k][i] && !now[k][i] {
                     return false;
                 }
                 if now[k][i] != fixed[k][i] {
@@ -258,13 +277,26 @@ impl<
                 }
             }
         }
-        let added = next.at.get(cols.n..next.n).unwrap_or(&[]);
-        // A unit response runs back from its stage and forward to the last column's.
-        let passes: usize = added.iter().map(|&(k, _)| k + 2 + next.top).sum();
-        if added.is_empty() || passes >= STAGE_FACTORIZATION * changed {
+        let added = next.at.get(stay..next.n).unwrap_or(&[]);
+        // A unit response runs back from its stage and forward to the last column's; the
+        // release back from the last freed column and forward over the horizon.
+        let passes: usize = added.iter().map(|&(k, _)| k + 2 + next.top).sum::<usize>()
+            + released.map_or(0, |t| t + 1 + N);
+        if (added.is_empty() && released.is_none()) || passes >= STAGE_FACTORIZATION * changed {
             return false;
         }
-        for l in cols.n..next.n {
+        // The kept columns' entries of `M` (all of it where none is freed), then the added
+        // ones' responses.
+        if released.is_none() {
+            next.m = cols.m;
+        } else {
+            for (j, &cj) in kept.iter().enumerate().take(stay) {
+                for (l, &cl) in kept.iter().enumerate().take(stay) {
+                    next.m[(j, l)] = cols.m[(cj, cl)];
+                }
+            }
+        }
+        for l in stay..next.n {
             let Some(&(k, i)) = next.at.get(l) else {
                 return false;
             };
@@ -282,14 +314,26 @@ impl<
         // `M` is negative definite where the QP on the new set has a positive definite
         // reduced Hessian; else (or on rounding that breaks it) the stages are
         // refactorized.
-        match nalgebra::Cholesky::new(-next.m) {
-            Some(chol) => {
-                next.chol = Some(chol);
-                *cols = next;
-                true
+        let Some(chol) = nalgebra::Cholesky::new(-next.m) else {
+            return false;
+        };
+        next.chol = Some(chol);
+        if let Some(top) = released {
+            // The freed columns' forces, cancelled: the gradient `mu` on each.
+            for g in self.gut.iter_mut().take(top + 1) {
+                *g = Vect::zeros();
             }
-            None => false,
+            for &(k, i) in cols.at.iter().take(cols.n).filter(|&&(k, i)| !now[k][i]) {
+                let (s, h) = (&qp.stages[k], qp.h(k));
+                let (x, u) = (self.sol.x[k], self.sol.u[k]);
+                let mu = mul(&h.r, &u) + mul(&h.s, &x) + s.gu + tr_mul(&s.b, &self.sol.pi[k]);
+                self.gut[k][i] = mu[i];
+            }
+            self.forced(qp, fixed, top, N);
+            self.take_forced_step();
         }
+        *cols = next;
+        true
     }
 
     /// The step from the current point (a solution on the factorized set `fixed` with the
@@ -320,6 +364,11 @@ impl<
             self.gut[k][i] = *dj;
         }
         self.forced(qp, fixed, cols.top, N);
+        self.take_forced_step();
+    }
+
+    /// Adds the response [`forced`](Self::forced) left over the whole horizon to the point.
+    fn take_forced_step(&mut self) {
         for k in 0..N {
             if k > 0 {
                 self.sol.x[k] += self.dx[k];
@@ -880,12 +929,12 @@ mod tests {
         d / m
     }
 
-    /// Bounds a move adds, held through the Schur complement on top of the factorized set,
-    /// give the solution that a factorization on the new set gives (states, controls and
-    /// dynamics multipliers to 1e-12), in two moves that add bounds on both sides (the
-    /// second on top of the first's columns); the added controls end on their bounds. A
-    /// move that frees a bound, or that would hold more than `COLUMNS` so, is left to a
-    /// refactorization.
+    /// Moves through the Schur complement on top of the factorized set give the solution
+    /// that a factorization on the new set gives (states, controls and dynamics multipliers
+    /// to 1e-12): two moves that add bounds on both sides (the second on top of the first's
+    /// columns), one that frees a column and adds a bound, one that only frees a column;
+    /// the added controls end on their bounds. A move that frees a bound the factorization
+    /// holds, or that would hold more than `COLUMNS` so, is left to a refactorization.
     #[test]
     fn a_move_through_the_schur_complement_solves_the_new_set() {
         let (mut qp, mut solver) = qp_and_solver();
@@ -896,22 +945,17 @@ mod tests {
         solver.sol = solved_on(&qp, &solver, &lower, &upper);
         assert!(solver.factorize(&qp, Newton::Held(&factored)));
         let mut cols = Columns::new();
-        let moves: [&[(usize, usize, bool)]; 2] = [
-            &[(3, 1, false), (4, 1, true)],
-            &[(0, 0, false), (5, 0, true)],
+        // Each move: the bounds it adds (stage, control, lower), the columns it frees, and
+        // the columns after it.
+        type Move<'a> = (&'a [(usize, usize, bool)], &'a [(usize, usize)], usize);
+        let moves: [Move; 4] = [
+            (&[(3, 1, false), (4, 1, true)], &[], 2),
+            (&[(0, 0, false), (5, 0, true)], &[], 4),
+            (&[(2, 1, false)], &[(4, 1)], 4),
+            (&[], &[(0, 0)], 3),
         ];
-        for (round, added) in moves.iter().enumerate() {
+        for (round, (added, freed, n)) in moves.iter().enumerate() {
             let before = held(&lower, &upper);
-            for &(k, i, lo) in added.iter() {
-                if lo {
-                    lower[k][i] = true;
-                } else {
-                    upper[k][i] = true;
-                }
-            }
-            let now = held(&lower, &upper);
-            assert!(solver.hold_by_columns(&qp, &factored, &before, &now, &mut cols));
-            assert_eq!(cols.n, 2 * (round + 1));
             // The added controls' distances to their bounds: all off before (not a trivial
             // move), all on after.
             let off = |s: &QpSolver<f64, 3, 2, 0, 0, 6>| -> std::vec::Vec<f64> {
@@ -922,12 +966,38 @@ mod tests {
             };
             let far = off(&solver);
             assert!(far.iter().all(|&d| d > 1e-2), "move {round}: {far:?}");
+            for &(k, i, lo) in added.iter() {
+                if lo {
+                    lower[k][i] = true;
+                } else {
+                    upper[k][i] = true;
+                }
+            }
+            for &(k, i) in freed.iter() {
+                (lower[k][i], upper[k][i]) = (false, false);
+            }
+            let now = held(&lower, &upper);
+            assert!(solver.hold_by_columns(&qp, &factored, &before, &now, &mut cols));
+            assert_eq!(cols.n, *n);
             solver.correct(&qp, &factored, &lower, &cols);
             let near = off(&solver);
             assert!(near.iter().all(|&d| d < 1e-14), "move {round}: {near:?}");
+            // One step of each route from zero lands within the QP's rounding (up to 2e-10
+            // here: a second step moves either by that much); a second step of each (plain:
+            // on the new factorization; here: on the old one, then the correction) brings
+            // them together to 1e-14.
             let want = solved_on(&qp, &solver, &lower, &upper);
             let g = gap(&solver.sol, &want);
-            assert!(g < 1e-12, "move {round}: {g:e}");
+            assert!(g < 1e-9, "move {round}: {g:e}");
+            let mut plain = solver.clone();
+            assert!(plain.factorize(&qp, Newton::Held(&now)));
+            plain.sol = want;
+            plain.held_step(&qp, &now);
+            let mut refined = solver.clone();
+            refined.held_step(&qp, &factored);
+            refined.correct(&qp, &factored, &lower, &cols);
+            let g = gap(&refined.sol, &plain.sol);
+            assert!(g < 1e-14, "move {round}, refined: {g:e}");
         }
         let res = solver.hold_rows(&qp, &lower, &upper);
         // The dynamics hold to rounding.
@@ -959,15 +1029,14 @@ mod tests {
         assert!(g < 1e-12, "step: {g:e}");
         let g = gap(&solver.sol, &want);
         assert!(g < 1e-9, "step: {g:e}");
-        // Freeing a bound, held by the factorization or by a column: refactorized.
+        // Freeing a bound the factorization holds: refactorized.
         let before = held(&lower, &upper);
-        for (k, i) in [(1, 0), (4, 1)] {
-            let mut now = before;
-            now[k][i] = false;
-            let mut c = cols.clone();
-            assert!(!solver.hold_by_columns(&qp, &factored, &before, &now, &mut c));
-            assert_eq!(c.n, 4);
-        }
+        let mut now = before;
+        now[1][0] = false;
+        now[2][0] = true;
+        let mut c = cols.clone();
+        assert!(!solver.hold_by_columns(&qp, &factored, &before, &now, &mut c));
+        assert_eq!(c.n, 3);
         // More than `COLUMNS` in all: refactorized.
         let mut now = before;
         for row in now.iter_mut() {
