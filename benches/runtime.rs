@@ -35,7 +35,7 @@ use nalgebra::SVector;
 #[path = "../runtime/tests/support/mod.rs"]
 mod support;
 
-use support::quadrotor::{NU, NX, X0, plant, qrbench};
+use support::quadrotor::{NU, NX, X0, closed_loop_qp, plant, qrbench};
 
 /// How many control bounds are active (within 1e-7) in `sol`.
 fn active_bounds<const N: usize>(
@@ -51,23 +51,8 @@ fn active_bounds<const N: usize>(
     n
 }
 
-/// The QP prepared at step `k` of the closed loop.
-fn qp_at<const N: usize>(dt: f64, k: usize) -> OcpQp<f64, NX, NU, 0, 0, N> {
-    let mut s = qrbench::<N>(dt);
-    let mut x = SVector::from(X0);
-    for _ in 0..k {
-        s.prepare();
-        let (u, _) = s.feedback(&x);
-        x = plant(&x, &u, dt, 10);
-    }
-    s.prepare();
-    let mut qp = *s.qp();
-    qp.x0 = x - s.state(0).copied().unwrap_or(x);
-    qp
-}
-
 fn bench_qp<const N: usize>(c: &mut Criterion, dt: f64, step: usize) {
-    let qp = qp_at::<N>(dt, step);
+    let qp = closed_loop_qp::<N>(dt, step);
     // Step 10 (the first figures' QP) has 1 active bound at N = 10 and none at N = 20; step
     // 2 has the most of the loop (7 and 5).
     let tag = if step == 10 {

@@ -15,8 +15,7 @@
 mod quadrotor;
 
 use mpc_runtime::{OcpQp, QpMethod, QpSolver, QpStatus};
-use nalgebra::SVector;
-use quadrotor::{NU, NX, X0, plant, qrbench};
+use quadrotor::{NU, NX, closed_loop_qp};
 
 fn main() {
     match std::env::args().nth(1).as_deref() {
@@ -26,21 +25,6 @@ fn main() {
         Some("N20-step2") => run::<20>(0.05, 2),
         _ => eprintln!("usage: cold_qp N10 | N20 | N10-step2 | N20-step2"),
     }
-}
-
-/// The QP prepared at step `k` of the closed loop (as `benches/runtime.rs`).
-fn qp_at<const N: usize>(dt: f64, k: usize) -> OcpQp<f64, NX, NU, 0, 0, N> {
-    let mut s = qrbench::<N>(dt);
-    let mut x = SVector::from(X0);
-    for _ in 0..k {
-        s.prepare();
-        let (u, _) = s.feedback(&x);
-        x = plant(&x, &u, dt, 10);
-    }
-    s.prepare();
-    let mut qp = *s.qp();
-    qp.x0 = x - s.state(0).copied().unwrap_or(x);
-    qp
 }
 
 /// One whole solve: the function whose inclusive count callgrind gives.
@@ -55,7 +39,7 @@ fn measured<const N: usize>(
 }
 
 fn run<const N: usize>(dt: f64, step: usize) {
-    let qp = qp_at::<N>(dt, step);
+    let qp = closed_loop_qp::<N>(dt, step);
     let mut fresh = Box::new(QpSolver::<f64, NX, NU, 0, 0, N, N>::NEW);
     fresh.settings.method = QpMethod::Riccati;
     fresh.settings.warm_active_set = true;

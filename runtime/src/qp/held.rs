@@ -815,20 +815,7 @@ mod tests {
         lower[1][0] = true;
         upper[3][1] = true;
         lower[4][1] = true;
-        let fixed = held(&lower, &upper);
-        assert!(fast.factorize(qp, Newton::Held(&fixed)));
-        fast.sol = QpSolution::NEW;
-        fast.sol.x[0] = qp.x0;
-        for k in 0..6 {
-            for i in 0..2 {
-                if lower[k][i] {
-                    fast.sol.u[k][i] = fast.ru[k].lo[i];
-                } else if upper[k][i] {
-                    fast.sol.u[k][i] = fast.ru[k].hi[i];
-                }
-            }
-        }
-        fast.held_step(qp, &fixed);
+        fast.sol = solved_on(qp, &fast, &lower, &upper);
         let mut slow = fast.clone();
         let got = fast.hold_rows(qp, &lower, &upper);
         let mut terms = [0.0f64; 8];
@@ -889,11 +876,12 @@ mod tests {
         terms.iter().position(|&t| t == top).unwrap_or(7) as u8
     }
 
-    /// The solution on the held set `now`, from a factorization on it: the plain route the
+    /// The solution on the held set `lower` / `upper`, from a factorization on it (one
+    /// Newton step from zero with the held controls on their bounds): the plain route the
     /// Schur complement must agree with.
-    fn solved_on(
-        qp: &OcpQp<f64, 3, 2, 0, 0, 6, 6>,
-        solver: &QpSolver<f64, 3, 2, 0, 0, 6>,
+    fn solved_on<const NG: usize, const NGN: usize>(
+        qp: &OcpQp<f64, 3, 2, NG, NGN, 6, 6>,
+        solver: &QpSolver<f64, 3, 2, NG, NGN, 6>,
         lower: &[[bool; 2]; 6],
         upper: &[[bool; 2]; 6],
     ) -> QpSolution<f64, 3, 2, 6> {

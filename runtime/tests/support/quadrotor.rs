@@ -200,6 +200,26 @@ pub fn qrbench<const N: usize>(dt: f64) -> Box<QrSolver<f64, N>> {
     qrbench_in::<f64, N, 0>(dt)
 }
 
+/// The QP that the QR-bench closed loop (the f64 solver of [`qrbench`] from `X0`, flying
+/// [`plant`]) prepares at step `k`, with `x0` the measured state's offset from the first
+/// stage, as the feedback would solve it.
+pub fn closed_loop_qp<const N: usize>(
+    dt: f64,
+    k: usize,
+) -> mpc_runtime::OcpQp<f64, NX, NU, 0, 0, N> {
+    let mut s = qrbench::<N>(dt);
+    let mut x = SVector::from(X0);
+    for _ in 0..k {
+        s.prepare();
+        let (u, _) = s.feedback(&x);
+        x = plant(&x, &u, dt, 10);
+    }
+    s.prepare();
+    let mut qp = *s.qp();
+    qp.x0 = x - s.state(0).copied().unwrap_or(x);
+    qp
+}
+
 /// A QR-bench solver: weights `W = diag(Q, R)`, `W_N = 5 Q`, the hover reference at (4, 0, 2)
 /// on every stage, the control bounds, and the first guess `x_k = x0`, `u_k = 0`.
 pub fn qrbench_in<T: Real, const N: usize, const NC: usize>(dt: f64) -> Box<QrSolver<T, N, NC>> {
