@@ -36,9 +36,10 @@
 //! iterative refinement) is a step on `F`, then the same correction. Up to 8 bounds are
 //! held so in one solve, while their passes cost less than refactorizing the stages up to
 //! the last one that changed (one stage's factorization counted as 10 stages of passes;
-//! about 15 in callgrind on QR-bench). A move may also free bounds held so: their forces,
-//! `-mu` from the controls' stationarity, are cancelled by one more pair of passes before
-//! the correction. A move that frees a bound the factorization holds refactorizes.
+//! about 14 in callgrind on QR-bench: `runtime/examples/cold_qp.rs`). A move may also free
+//! bounds held so: their forces, `-mu` from the controls' stationarity, are cancelled by
+//! one more pair of passes before the correction. A move that frees a bound the
+//! factorization holds refactorizes.
 //!
 //! The set is taken from each interior-point solution (the control bounds whose multiplier
 //! exceeds their slack) only when no other row is active and the QP has no soft row;
@@ -300,11 +301,7 @@ impl<
             let Some(&(k, i)) = next.at.get(l) else {
                 return false;
             };
-            for g in self.gut.iter_mut().take(k + 1) {
-                *g = Vect::zeros();
-            }
-            self.gut[k][i] = T::ONE;
-            self.forced(qp, fixed, k, next.top);
+            self.forced(qp, fixed, &[((k, i), T::ONE)], next.top);
             for (j, &(kj, ij)) in next.at.iter().enumerate().take(l + 1) {
                 let m = self.du[kj][ij];
                 next.m[(j, l)] = m;
@@ -318,18 +315,14 @@ impl<
             return false;
         };
         next.chol = Some(chol);
-        if let Some(top) = released {
+        if released.is_some() {
             // The freed columns' forces, cancelled: the gradient `mu` on each.
-            for g in self.gut.iter_mut().take(top + 1) {
-                *g = Vect::zeros();
+            let mut forces = [((0, 0), T::ZERO); COLUMNS];
+            let freed = cols.at.iter().take(cols.n).filter(|&&(k, i)| !now[k][i]);
+            for (f, &(k, i)) in forces.iter_mut().zip(freed) {
+                *f = ((k, i), self.control_multipliers(qp, k)[i]);
             }
-            for &(k, i) in cols.at.iter().take(cols.n).filter(|&&(k, i)| !now[k][i]) {
-                let (s, h) = (&qp.stages[k], qp.h(k));
-                let (x, u) = (self.sol.x[k], self.sol.u[k]);
-                let mu = mul(&h.r, &u) + mul(&h.s, &x) + s.gu + tr_mul(&s.b, &self.sol.pi[k]);
-                self.gut[k][i] = mu[i];
-            }
-            self.forced(qp, fixed, top, N);
+            self.forced(qp, fixed, forces.get(..cols.n - stay).unwrap_or(&[]), N);
             self.take_forced_step();
         }
         *cols = next;
@@ -357,13 +350,11 @@ impl<
         }
         // -M d = u - b.
         let d = chol.solve(&r);
-        for g in self.gut.iter_mut().take(cols.top + 1) {
-            *g = Vect::zeros();
+        let mut forces = [((0, 0), T::ZERO); COLUMNS];
+        for (f, (&at, &dj)) in forces.iter_mut().zip(cols.at.iter().zip(d.iter())) {
+            *f = (at, dj);
         }
-        for (dj, &(k, i)) in d.iter().zip(cols.at.iter().take(cols.n)) {
-            self.gut[k][i] = *dj;
-        }
-        self.forced(qp, fixed, cols.top, N);
+        self.forced(qp, fixed, forces.get(..cols.n).unwrap_or(&[]), N);
         self.take_forced_step();
     }
 
@@ -379,25 +370,33 @@ impl<
         self.sol.xn += self.dxn;
     }
 
-    /// The response of the linear-quadratic problem on the factorized set `fixed` to the
-    /// control gradients `gut` of stages `0..=top` alone (no other gradient, no dynamics
-    /// residual, the initial state fixed): the Riccati solve of [`lq_solve`](Self::lq_solve)
-    /// with the terms that are zero left out, its backward pass from stage `top` (above it
-    /// everything is zero) and its forward pass to stage `upto` (`du`, `dx`); with `upto`
-    /// at `N`, over the whole horizon with the dynamics multipliers (`pi_new`) and `dxn`.
+    /// The response of the linear-quadratic problem on the factorized set `fixed` to
+    /// `forces`, gradients on single controls (stage, control) and nothing else (no other
+    /// gradient, no dynamics residual, the initial state fixed): the Riccati solve of
+    /// [`lq_solve`](Self::lq_solve) with the terms that are zero left out, its backward pass
+    /// from the forces' last stage `top` (above it everything is zero) and its forward pass
+    /// to stage `upto` (`du`, `dx`); with `upto` at `N`, over the whole horizon with the
+    /// dynamics multipliers (`pi_new`) and `dxn`.
     fn forced<const NH: usize>(
         &mut self,
         qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>,
         fixed: &[[bool; NU]; N],
-        top: usize,
+        forces: &[((usize, usize), T)],
         upto: usize,
     ) {
         let full = upto >= N;
+        let top = forces.iter().map(|&((k, _), _)| k).max().unwrap_or(0);
         let mut pv = Vect::<T, NX>::zeros();
         for k in (0..N.min(top + 1)).rev() {
             let s = &qp.stages[k];
             self.pvn[k] = pv;
-            let mut y = mul(&self.linv[k], &(self.gut[k] + tr_mul(&s.b, &pv)));
+            let mut g = tr_mul(&s.b, &pv);
+            for &((_, i), v) in forces.iter().filter(|&&((kf, _), _)| kf == k) {
+                if let Some(gi) = g.get_mut(i) {
+                    *gi += v;
+                }
+            }
+            let mut y = mul(&self.linv[k], &g);
             if let Some(held) = fixed.get(k) {
                 for (yi, _) in y.iter_mut().zip(held).filter(|(_, h)| **h) {
                     *yi = T::ZERO;
@@ -433,6 +432,18 @@ impl<
         if full {
             self.dxn = dx;
         }
+    }
+
+    /// The controls' stationarity at stage `k` of the current point, `mu = R u + S x + gu +
+    /// B'pi`: a held bound's multiplier (`lam_l - lam_u`), minus the force on a column.
+    fn control_multipliers<const NH: usize>(
+        &self,
+        qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>,
+        k: usize,
+    ) -> Vect<T, NU> {
+        let (s, h) = (&qp.stages[k], qp.h(k));
+        let (x, u) = (self.sol.x[k], self.sol.u[k]);
+        mul(&h.r, &u) + mul(&h.s, &x) + s.gu + tr_mul(&s.b, &self.sol.pi[k])
     }
 
     /// The largest violation of a bound by a control that `lower` / `upper` leave free.
@@ -480,10 +491,7 @@ impl<
         let tol = self.settings.tol_ineq.max(self.settings.tol_stat);
         let mut moved = false;
         for k in 0..N {
-            let s = &qp.stages[k];
-            let h = qp.h(k);
-            let (x, u) = (self.sol.x[k], self.sol.u[k]);
-            let mu = mul(&h.r, &u) + mul(&h.s, &x) + s.gu + tr_mul(&s.b, &self.sol.pi[k]);
+            let (mu, u) = (self.control_multipliers(qp, k), self.sol.u[k]);
             let r = &self.ru[k];
             for i in 0..NU {
                 let (m, v) = (mu[i], u[i]);
