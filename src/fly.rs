@@ -1,5 +1,5 @@
-//! `mpcc fly`: fly a mission through PX4 over MAVLink with the generated NMPC, and
-//! `mpcc sitl`: the simulated PX4 vehicle to fly it against.
+//! `mpcc fly`: fly a mission through PX4 over MAVLink with the generated NMPC (`mpcc sitl`,
+//! the simulated PX4 vehicle to fly it against, is in `sitl.rs`).
 
 use std::process::ExitCode;
 use std::sync::Arc;
@@ -8,14 +8,13 @@ use std::time::Instant;
 
 use firmware_shim::messages;
 use firmware_shim::pilot::{self, Pilot, PilotConfig};
+use firmware_shim::profile::VehicleProfile;
 use firmware_shim::setpoint::ThrustMap;
 use firmware_shim::transport::{Address, Link};
-use firmware_shim::vehicle::{SimVehicle, VehicleConfig};
-use mpc_sim::estimator::EstimatorConfig;
 use mpc_sim::mission::{G, MissionKind};
 use mpc_sim::report;
 
-use crate::{FlyArgs, SitlArgs};
+use crate::FlyArgs;
 
 /// Ctrl-C sets the returned flag (once per process; a second handler cannot be installed).
 fn interrupt_flag() -> Arc<AtomicBool> {
@@ -73,6 +72,10 @@ fn pilot_config(args: &FlyArgs) -> Result<PilotConfig, String> {
         map.validate()
             .map_err(|e| format!("--hover-thrust {h}: {e}"))?;
         cfg.thrust_map = Some(map);
+    }
+    cfg.flip_rate = args.shape.flip_rate;
+    if let Some(path) = &args.vehicle {
+        cfg.vehicle = Some(VehicleProfile::load(path).map_err(|e| format!("--vehicle: {e}"))?);
     }
     cfg.setpoint_rate = args.rate;
     cfg.link.odometry_timeout = args.odometry_timeout;
@@ -206,6 +209,13 @@ pub(crate) fn fly(args: &FlyArgs) -> ExitCode {
         eprintln!("error: {e}");
         return ExitCode::FAILURE;
     }
+    if !args.no_plots
+        && let Some(v) = &rep.vehicle
+        && let Err(e) = v.save(&args.out.join("vehicle.json"))
+    {
+        eprintln!("error: {e}");
+        return ExitCode::FAILURE;
+    }
     if rep.summary.as_ref().is_some_and(|s| s.success) && rep.failsafes.is_empty() {
         ExitCode::SUCCESS
     } else {
@@ -217,6 +227,25 @@ fn print_link_figures(rep: &pilot::FlightReport) {
     let p = &rep.setpoint_period;
     let s = &rep.solver_period;
     println!("session: {}", rep.session);
+    if let Some(v) = &rep.vehicle {
+        println!("vehicle: {}", v.describe());
+    }
+    if let Some(f) = &rep.flip {
+        println!(
+            "flip: {:.1} rad/s (this vehicle: up to {:.1}), ramped at {:.0} rad/s^2, {:.2} s, \
+             climbing in at {:.1} m/s",
+            f.rate, f.max_rate, f.accel, f.duration, f.ascend_speed
+        );
+    }
+    let rtt = rep
+        .round_trip_ms
+        .map_or("no TIMESYNC answer".to_string(), |(a, b)| {
+            format!("round trip {a:.1}-{b:.1} ms")
+        });
+    println!(
+        "clock: PX4's runs at {:.4} of the wall clock, {} jumps; {rtt}",
+        rep.clock_rate, rep.clock_jumps
+    );
     for (f, t) in &rep.failsafes {
         println!("failsafe: {f} at {t:.3} s");
     }
@@ -245,107 +274,4 @@ fn print_link_figures(rep: &pilot::FlightReport) {
         rep.solver_us.mean,
         rep.solver_us.p99
     );
-}
-
-pub(crate) fn sitl(args: &SitlArgs) -> ExitCode {
-    if let Some(d) = args.duration
-        && !(d.is_finite() && d > 0.0)
-    {
-        eprintln!("error: --duration {d}: give a time > 0 s");
-        return ExitCode::from(2);
-    }
-    let link = match open(&args.connect, true) {
-        Ok(l) => l,
-        Err(e) => {
-            eprintln!("error: {e}");
-            return ExitCode::from(2);
-        }
-    };
-    let mut cfg = VehicleConfig {
-        seed: args.seed,
-        ..VehicleConfig::default()
-    };
-    if args.perfect_sensing {
-        cfg.estimator = EstimatorConfig::perfect();
-    }
-    let mut vehicle = SimVehicle::new(cfg);
-    let stop = interrupt_flag();
-    if !args.json {
-        eprintln!(
-            "sitl: simulated PX4 (system 1, component 1) on {}; hover thrust (MPC_THR_HOVER) \
-             {:.4}; Ctrl-C to stop",
-            args.connect,
-            vehicle.thrust_map().hover_thrust
-        );
-    }
-    let duration = args.duration.unwrap_or(f64::INFINITY);
-    let mut shown = 0;
-    let mut disarmed_since: Option<f64> = None;
-    let json = args.json;
-    firmware_shim::vehicle::serve_with(&link, &mut vehicle, duration, &stop, |v| {
-        let r = v.record();
-        if !json {
-            for m in r.mode_changes.iter().skip(shown) {
-                eprintln!("{:9.3} s  {m}", m.time);
-            }
-        }
-        shown = r.mode_changes.len();
-        if r.crashed.is_some() {
-            return false;
-        }
-        // --exit-after-flight: flown, disarmed again, and two heartbeats later (1 Hz) so that
-        // the controller has seen the disarm.
-        let done = r.first_liftoff.is_some() && !v.commander().armed();
-        if !done {
-            disarmed_since = None;
-            return true;
-        }
-        let since = *disarmed_since.get_or_insert(v.time());
-        !(args.exit_after_flight && v.time() - since > 2.1)
-    });
-    sitl_summary(&vehicle, args.json)
-}
-
-fn sitl_summary(vehicle: &SimVehicle, json: bool) -> ExitCode {
-    let r = vehicle.record();
-    if json {
-        let v3 = |p: &mpc_sim::nalgebra::Vector3<f64>| [p.x, p.y, p.z];
-        let v = serde_json::json!({
-            "time_s": r.time,
-            "crashed": r.crashed,
-            "crash_time_s": r.crash_time,
-            "airborne_time_s": r.airborne_time,
-            "first_liftoff_s": r.first_liftoff,
-            "max_height_m": r.max_height,
-            "offboard_pitch_rotation_rad": r.offboard_pitch_rotation,
-            "offboard_max_pitch_rate_rad_s": r.offboard_max_pitch_rate,
-            "touchdowns": r.touchdowns.iter().map(|t| serde_json::json!({
-                "time_s": t.time,
-                "vertical_speed_m_s": t.vertical_speed,
-                "position_m": v3(&t.position),
-            })).collect::<Vec<_>>(),
-            "mode_changes": r.mode_changes.iter().map(|m| serde_json::json!({
-                "time_s": m.time,
-                "from": m.from.to_string(),
-                "to": m.to.to_string(),
-                "failsafe": m.failsafe,
-            })).collect::<Vec<_>>(),
-            "armed_at_s": r.armed_at,
-            "disarmed_at_s": r.disarmed_at,
-            "armed": vehicle.commander().armed(),
-            "mode": vehicle.commander().mode().to_string(),
-            "offboard_loss_failsafe_at_s": vehicle.commander().failsafe_at(),
-            "final_position_m": v3(&r.final_position),
-        });
-        println!("{v}");
-    } else {
-        for line in r.summary_lines() {
-            println!("sitl: {line}");
-        }
-    }
-    if r.crashed.is_some() {
-        ExitCode::FAILURE
-    } else {
-        ExitCode::SUCCESS
-    }
 }

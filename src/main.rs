@@ -9,6 +9,7 @@ use clap::{Parser, Subcommand};
 mod bench;
 mod fly;
 mod sim;
+mod sitl;
 mod throw;
 use mpc_dsl::lang::{ParseOptions, parse};
 use mpc_dsl::ocp::{Dynamics, Integrator, Ocp, ParamKind, Variable};
@@ -93,6 +94,11 @@ struct FlyArgs {
     /// The hover mission's hold [s] (default 5).
     #[arg(long, value_name = "S")]
     hover_time: Option<f64>,
+    /// The vehicle's profile (JSON: mass, rotor thrust, pitch lever and inertia, rotor time
+    /// constant; docs/shim.md). Default: PX4's SIH parameters; a flip needs one or the other.
+    /// The profile flown is written to OUT/vehicle.json.
+    #[arg(long, value_name = "FILE")]
+    vehicle: Option<PathBuf>,
     #[command(flatten)]
     shape: MissionShape,
     /// Give up (and land) after this long [s].
@@ -124,12 +130,30 @@ struct SitlArgs {
     /// shows the disarm to the controller).
     #[arg(long)]
     exit_after_flight: bool,
-    /// Seed of the estimation noise.
+    /// Seed of the estimation noise (and of the default height error).
     #[arg(long, default_value_t = 0)]
     seed: u64,
-    /// Odometry without noise or latency.
+    /// Odometry without noise, latency or height error (unless --height-bias).
     #[arg(long)]
     perfect_sensing: bool,
+    /// The vehicle PX4 flies: agile (the simulator's design vehicle: thrust-to-weight 4,
+    /// ~390 rad/s^2, 30 ms rotors) or stock (PX4's SIH quadrotor: 1 kg, 4 x 5 N, ~80 rad/s^2
+    /// with PX4's default rate gains, MPC_THR_HOVER 0.5).
+    #[arg(long, default_value = "agile", value_name = "NAME")]
+    vehicle: String,
+    /// The vehicle's clock in seconds per wall-clock second (0.5..2.0; PX4 SITL in
+    /// lockstep ran 1.0-1.5 % slow). Its timeouts run on that clock.
+    #[arg(long, default_value_t = 0.988, value_name = "R")]
+    clock_rate: f64,
+    /// At vehicle time AT [s], shift every timestamp from then on by BY [s] (either sign: a
+    /// PX4 reboot, a restarted simulation).
+    #[arg(long, value_name = "AT:BY", allow_hyphen_values = true)]
+    clock_jump: Option<String>,
+    /// The estimate's height error (reported minus true) [m], reached 20 s after arming
+    /// (default: 0.2..0.7 m either way, drawn from the seed, as PX4's EKF2 on GNSS height;
+    /// 0 with --perfect-sensing).
+    #[arg(long, value_name = "M", allow_hyphen_values = true)]
+    height_bias: Option<f64>,
     /// Print the summary as one JSON object on stdout.
     #[arg(long)]
     json: bool,
@@ -301,7 +325,7 @@ fn main() -> ExitCode {
         Command::Sim(args) => sim::run(&args),
         Command::Bench(args) => bench::run(&args),
         Command::Fly(args) => fly::fly(&args),
-        Command::Sitl(args) => fly::sitl(&args),
+        Command::Sitl(args) => sitl::sitl(&args),
         Command::Check { file, variant } => check(&file, variant),
         Command::Build(args) => build(&args),
     }

@@ -6,12 +6,19 @@
 //!   ATTITUDE_QUATERNION), the generated NMPC flying the simulator's missions, body-rate +
 //!   thrust setpoints out, clocked by the vehicle, with latency compensation and the
 //!   session's failsafes; [`pilot::run`] drives it on a link in real time;
+//! * [`clock`]: the vehicle's clock (rate and offset from the states' timestamps, jumps) and
+//!   the link's round trip (TIMESYNC);
+//! * [`profile`]: the vehicle a mission flies (from PX4's SIH parameters or a profile file)
+//!   and the flip planned for it;
 //! * [`link`]: the offboard session as a state machine clocked by the caller: odometry rate,
 //!   streaming before OFFBOARD, mode and arm commands with acknowledgements, retries and
 //!   timeouts, landing at the end, and the failsafes (odometry lost, solver failures,
 //!   operator abort, PX4 leaving OFFBOARD);
 //! * [`messages`]: the MAVLink 2 (common dialect) messages of the offboard link, built and
 //!   read with the `mavlink` crate;
+//! * [`watch`]: the flight watch: on the ground (PX4's land detector, a stalled landing) and
+//!   off the mission (far below or off the reference, inverted outside the flip, down
+//!   before the landing);
 //! * [`frames`]: PX4's NED world / FRD body frames against the models' ENU / FLU, for
 //!   positions, velocities, quaternions and body rates;
 //! * [`setpoint`]: the body-rate + collective-thrust setpoint PX4 takes, made safe (never
@@ -28,15 +35,18 @@
 //!   a record of the true flight; [`vehicle::serve`] puts it on a link in real time;
 //! * [`relay`]: a fault-injecting UDP relay (loss, duplication, jitter, blackouts) for tests.
 
+pub mod clock;
 pub mod frames;
 pub mod link;
 pub mod messages;
 pub mod pilot;
+pub mod profile;
 pub mod relay;
 pub mod setpoint;
 pub mod sitl;
 pub mod transport;
 pub mod vehicle;
+pub mod watch;
 
 /// The linear-algebra crate of this crate's API.
 pub use nalgebra;

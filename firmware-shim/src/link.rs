@@ -152,6 +152,34 @@ pub enum Failsafe {
     Abort,
     /// PX4 left OFFBOARD on its own.
     Px4LeftOffboard,
+    /// PX4 disarmed the vehicle in flight (its land detector, a kill switch, a crash).
+    Px4Disarmed,
+    /// The vehicle is not where the mission needs it: AUTO.LAND.
+    OffMission(Deviation),
+}
+
+impl Failsafe {
+    /// The mode the session asks PX4 for (`None`: PX4 decided already).
+    pub fn mode(self) -> Option<Px4Mode> {
+        match self {
+            Failsafe::Abort | Failsafe::OffMission(_) => Some(Px4Mode::Land),
+            Failsafe::OdometryLost | Failsafe::SolverFailures => Some(Px4Mode::Return),
+            Failsafe::Px4LeftOffboard | Failsafe::Px4Disarmed => None,
+        }
+    }
+}
+
+/// How the vehicle left its mission ([`Failsafe::OffMission`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Deviation {
+    /// Far below the reference.
+    BelowReference,
+    /// Far from the reference.
+    OffCourse,
+    /// Upside down outside the flip.
+    Inverted,
+    /// On the ground before the landing.
+    OnGround,
 }
 
 /// Where the session is.
@@ -226,6 +254,7 @@ pub struct Session {
     armed: bool,
     solver_failures: u32,
     abort: bool,
+    trip: Option<Failsafe>,
     interval_requested: bool,
     finish: bool,
 }
@@ -243,6 +272,7 @@ impl Session {
             armed: false,
             solver_failures: 0,
             abort: false,
+            trip: None,
             interval_requested: false,
             finish: false,
         }
@@ -319,6 +349,14 @@ impl Session {
         self.abort = true;
     }
 
+    /// The controller found the vehicle off its mission: the next tick engages `f` (only
+    /// while flying; otherwise ignored).
+    pub fn trip(&mut self, f: Failsafe) {
+        if self.phase == Phase::Flying {
+            self.trip = Some(f);
+        }
+    }
+
     /// The mission is over and the vehicle is on the ground: the next tick requests AUTO.LAND
     /// (PX4 disarms on its own after landing; a disarm command would be refused while its
     /// land detector still says airborne). Only while flying; otherwise ignored.
@@ -341,15 +379,9 @@ impl Session {
     fn engage(&mut self, f: Failsafe, now: f64, tick: &mut Tick) {
         self.phase = Phase::Failsafe(f);
         tick.failsafe = Some(f);
-        let mode = if f == Failsafe::Abort {
-            Px4Mode::Land
-        } else {
-            Px4Mode::Return
-        };
-        if f != Failsafe::Px4LeftOffboard {
-            self.start(Command::SetMode(mode), now, &mut tick.send);
-        } else {
-            self.pending = None;
+        match f.mode() {
+            Some(mode) => self.start(Command::SetMode(mode), now, &mut tick.send),
+            None => self.pending = None,
         }
     }
 
@@ -459,6 +491,11 @@ impl Session {
                 self.phase = Phase::Finishing;
                 self.start(Command::SetMode(Px4Mode::Land), now, &mut tick.send);
             }
+            Phase::Flying if !self.armed => self.engage(Failsafe::Px4Disarmed, now, &mut tick),
+            Phase::Flying if self.trip.is_some() => {
+                let f = self.trip.take().unwrap_or(Failsafe::Abort);
+                self.engage(f, now, &mut tick);
+            }
             Phase::Flying => {
                 let stale = self
                     .last_odometry
@@ -472,7 +509,10 @@ impl Session {
                 }
             }
             Phase::Finishing => {
-                if self.pending.is_none() && !self.armed {
+                // Disarmed is done, whether PX4's AUTO.LAND did it or its land detector did
+                // before (PX4 may refuse AUTO.LAND on a disarmed vehicle).
+                if !self.armed {
+                    self.pending = None;
                     self.phase = Phase::Done;
                 }
             }

@@ -162,6 +162,12 @@ pub fn param_name_is(padded: &[u8; 16], name: &str) -> bool {
     padded.get(..len) == Some(name.as_bytes())
 }
 
+/// TIMESYNC request (`tc1` = 0) stamped `ts1` \[ns, the companion's clock, > 0\]: PX4 answers
+/// with its own time in `tc1` and `ts1` echoed.
+pub fn timesync_request(ts1: i64) -> MavMessage {
+    MavMessage::TIMESYNC(mc::TIMESYNC_DATA { tc1: 0, ts1 })
+}
+
 /// SET_ATTITUDE_TARGET with body rates `rates_frd` [rad/s] and normalized thrust in [0, 1];
 /// the attitude is ignored (type_mask 128) and `q` is the identity, as PX4 wants it filled.
 /// The values are sent as given: make them safe first ([`crate::setpoint`]).
@@ -278,6 +284,13 @@ pub enum Inbound {
         /// Whether PX4 is still working on it (MAV_RESULT_IN_PROGRESS).
         in_progress: bool,
     },
+    /// TIMESYNC answered by PX4 (`tc1` its time, `ts1` our request's) \[ns\].
+    Timesync {
+        /// PX4's time when it answered \[ns\].
+        tc1: i64,
+        /// The `ts1` of our request, echoed \[ns\].
+        ts1: i64,
+    },
     /// Not from PX4's autopilot, in a frame we do not use, or a message the shim ignores.
     Ignored,
 }
@@ -325,12 +338,45 @@ fn rotate_frd_to_ned(q: [f32; 4], v: [f32; 3]) -> [f32; 3] {
     r.map(|row| row[0] * v[0] + row[1] * v[1] + row[2] * v[2])
 }
 
-/// Classifies a message received from `header`'s sender.
+/// Classifies a message received from `header`'s sender, PX4 being system [`PX4_SYSTEM`].
 pub fn classify(header: &MavHeader, msg: &MavMessage) -> Inbound {
-    let from_px4 = header.system_id == PX4_SYSTEM && header.component_id == PX4_COMPONENT;
+    classify_from(header, msg, PX4_SYSTEM)
+}
+
+/// The system id of a PX4 autopilot whose HEARTBEAT this is (autopilot PX4, component
+/// [`PX4_COMPONENT`]): PX4 SITL's instance `i` is system `i + 1`.
+pub fn px4_heartbeat_system(header: &MavHeader, msg: &MavMessage) -> Option<u8> {
+    match msg {
+        MavMessage::HEARTBEAT(h)
+            if h.autopilot == MavAutopilot::MAV_AUTOPILOT_PX4
+                && header.component_id == PX4_COMPONENT =>
+        {
+            Some(header.system_id)
+        }
+        _ => None,
+    }
+}
+
+/// Addresses a message we send (setpoint, command, parameter request) to PX4's `system`.
+pub fn retarget(msg: &mut MavMessage, system: u8) {
+    match msg {
+        MavMessage::SET_ATTITUDE_TARGET(m) => m.target_system = system,
+        MavMessage::COMMAND_LONG(m) => m.target_system = system,
+        MavMessage::PARAM_REQUEST_READ(m) => m.target_system = system,
+        _ => {}
+    }
+}
+
+/// [`classify`] for PX4 as system `system`: what comes from another system is ignored,
+/// heartbeats included.
+pub fn classify_from(header: &MavHeader, msg: &MavMessage, system: u8) -> Inbound {
+    let from_px4 = header.system_id == system && header.component_id == PX4_COMPONENT;
     match msg {
         MavMessage::HEARTBEAT(h) => {
-            if h.autopilot != MavAutopilot::MAV_AUTOPILOT_PX4 || header.component_id == 0 {
+            if h.autopilot != MavAutopilot::MAV_AUTOPILOT_PX4
+                || header.component_id == 0
+                || header.system_id != system
+            {
                 return Inbound::Ignored;
             }
             Inbound::Heartbeat {
@@ -381,6 +427,10 @@ pub fn classify(header: &MavHeader, msg: &MavMessage) -> Inbound {
                 value: p.param_value,
             }
         }
+        MavMessage::TIMESYNC(t) if t.tc1 > 0 => Inbound::Timesync {
+            tc1: t.tc1,
+            ts1: t.ts1,
+        },
         MavMessage::COMMAND_ACK(a) => Inbound::Ack {
             command: a.command,
             accepted: a.result == MavResult::MAV_RESULT_ACCEPTED,

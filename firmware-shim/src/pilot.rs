@@ -40,17 +40,22 @@ use mavlink::dialects::common::MavMessage;
 use mpc_sim::controller::{Controller, InnerCommand, NmpcController, OuterStats};
 use mpc_sim::estimator::Estimate;
 use mpc_sim::log::Sample;
-use mpc_sim::mission::{G, Mission, MissionConfig, MissionInput, Phase as MissionPhase};
+use mpc_sim::mission::{
+    G, Mission, MissionConfig, MissionInput, MissionKind, Phase as MissionPhase,
+};
 use mpc_sim::plant::QuadState;
 use mpc_sim::report::{self, TrialSummary};
 use mpc_sim::run::{Outcome, SimConfig, Touchdown, TrialResult};
 use nalgebra::{UnitQuaternion, Vector3};
 
+use crate::clock::{RoundTrip, VehicleClock, Verdict};
 use crate::frames::{frd_to_flu, ned_to_enu, quat_from_mavlink, quat_ned_frd_to_enu_flu};
 use crate::link::{Failsafe, LinkConfig, LinkConfigError, Phase, Session};
-use crate::messages::{self, Inbound, Px4Mode};
+use crate::messages::{self, Inbound, LandedState, Px4Mode};
+use crate::profile::{FlipPlan, ProfileError, SIH_PARAMS, VehicleProfile, plan_flip};
 use crate::setpoint::{Px4Setpoint, RateLimits, SetpointError, ThrustMap, make_setpoint};
 use crate::transport::Link;
+use crate::watch::Watch;
 
 /// LOCAL_POSITION_NED and ATTITUDE_QUATERNION closer than this make one state \[us\].
 pub const PAIR_WINDOW_US: u64 = 25_000;
@@ -58,6 +63,10 @@ pub const PAIR_WINDOW_US: u64 = 25_000;
 pub const ODOMETRY_PREFERENCE_US: u64 = 500_000;
 /// The estimate is brought forward by its age, at most this much \[s\].
 pub const MAX_PREDICTION_S: f64 = 0.25;
+/// The least bound on a state's delay that TIMESYNC's round trips set \[s\].
+pub const MIN_DELAY_BOUND_S: f64 = 0.005;
+/// TIMESYNC requests go out this often \[s, wall clock\].
+pub const TIMESYNC_PERIOD_S: f64 = 0.5;
 /// Height above the start point and speed below which the vehicle counts as on the ground.
 pub const GROUND_HEIGHT_M: f64 = 0.05;
 /// See [`GROUND_HEIGHT_M`] [m/s].
@@ -80,6 +89,11 @@ pub struct PilotConfig {
     pub setpoint_rate: f64,
     /// Bring the estimate forward by its age before each solve.
     pub predict: bool,
+    /// The vehicle; `None`: read PX4 SIH's parameters before starting.
+    pub vehicle: Option<VehicleProfile>,
+    /// The flip's pitch rate asked for [rad/s]; `None`: the paper's 5*pi, or the fastest
+    /// the vehicle can fly if slower ([`plan_flip`]).
+    pub flip_rate: Option<f64>,
 }
 
 impl PilotConfig {
@@ -93,6 +107,8 @@ impl PilotConfig {
             limits: RateLimits::default(),
             setpoint_rate: 100.0,
             predict: true,
+            vehicle: None,
+            flip_rate: None,
         }
     }
 
@@ -122,6 +138,9 @@ pub enum PilotError {
     /// The thrust map or the rate bounds.
     #[error(transparent)]
     Setpoint(#[from] SetpointError),
+    /// The vehicle's profile, or the maneuver beyond it.
+    #[error(transparent)]
+    Vehicle(#[from] ProfileError),
     /// The setpoint rate.
     #[error(
         "setpoint rate {0} Hz is out of range: use 25 to 250 Hz (PX4 needs at least 2 Hz, the solver runs at 20 Hz)"
@@ -180,6 +199,7 @@ pub struct StateInput {
     first_us: Option<u64>,
     position: Option<(u64, [f32; 3], [f32; 3])>,
     attitude: Option<(u64, [f32; 4], [f32; 3])>,
+    parsed_pair: bool,
     /// States dropped: duplicates, overtaken (older than the last), not finite.
     pub dropped: u64,
     /// States accepted.
@@ -189,15 +209,25 @@ pub struct StateInput {
 }
 
 impl StateInput {
-    /// A new state from `inbound`, if it makes one.
+    /// A new state from `inbound`, if it makes one: [`StateInput::parse`], then
+    /// [`StateInput::accept`].
     pub fn on_inbound(&mut self, inbound: &Inbound) -> Option<State> {
-        let (time_us, s) = match *inbound {
+        let (time_us, s) = self.parse(inbound)?;
+        self.accept(time_us, s)
+    }
+
+    /// The state `inbound` makes, with its vehicle time \[us\], not yet judged: `None` inside
+    /// when it is not finite; nothing when `inbound` makes no state (not a state message, or
+    /// half of a pair, or a pair while ODOMETRY comes).
+    pub fn parse(&mut self, inbound: &Inbound) -> Option<(u64, Option<State>)> {
+        self.parsed_pair = !matches!(inbound, Inbound::Odometry(_));
+        match *inbound {
             Inbound::Odometry(o) => {
                 self.last_odometry_us = Some(o.time_us);
-                (
+                Some((
                     o.time_us,
                     state_from_ned(o.time_us, o.position, o.velocity, o.q, o.rates),
-                )
+                ))
             }
             Inbound::LocalPosition {
                 time_boot_ms,
@@ -207,7 +237,7 @@ impl StateInput {
                 let t = u64::from(time_boot_ms) * 1000;
                 self.first_us.get_or_insert(t);
                 self.position = Some((t, position, velocity));
-                self.pair(t)?
+                self.pair(t)
             }
             Inbound::Attitude {
                 time_boot_ms,
@@ -217,24 +247,37 @@ impl StateInput {
                 let t = u64::from(time_boot_ms) * 1000;
                 self.first_us.get_or_insert(t);
                 self.attitude = Some((t, q, rates));
-                self.pair(t)?
+                self.pair(t)
             }
-            _ => return None,
-        };
-        if self.last_us.is_some_and(|last| time_us <= last) {
-            self.dropped += 1;
-            return None;
+            _ => None,
         }
-        let Some(s) = s else {
+    }
+
+    /// Accepts a parsed state if it is finite and newer than the last one (else counts it
+    /// dropped).
+    pub fn accept(&mut self, time_us: u64, s: Option<State>) -> Option<State> {
+        let newer = self.last_us.is_none_or(|last| time_us > last);
+        let Some(s) = s.filter(|_| newer) else {
             self.dropped += 1;
             return None;
         };
-        if !matches!(inbound, Inbound::Odometry(_)) {
+        if self.parsed_pair {
             self.from_pairs += 1;
         }
         self.last_us = Some(time_us);
         self.accepted += 1;
         Some(s)
+    }
+
+    /// Forgets the vehicle's times seen (after a jump of its clock): the next state is
+    /// accepted whatever its time.
+    pub fn restart(&mut self) {
+        *self = Self {
+            dropped: self.dropped,
+            accepted: self.accepted,
+            from_pairs: self.from_pairs,
+            ..Self::default()
+        };
     }
 
     /// A state from the newest position and attitude, when they are close enough in time and
@@ -256,42 +299,6 @@ impl StateInput {
     }
 }
 
-/// The vehicle's clock, estimated from the states' timestamps and their arrival times: the
-/// offset of the vehicle's clock over the wall clock is that of the least delayed state (a
-/// late state does not hold the clock back: it is older by its delay, which the prediction
-/// then makes up for), forgotten at [`CLOCK_DRIFT`] so that a clock drift or a change of the
-/// link's base latency is followed. Monotonic.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-struct VehicleClock {
-    offset: Option<f64>,
-    set_at: f64,
-    last: f64,
-}
-
-/// How fast the clock estimate forgets its least delay [s per s].
-pub const CLOCK_DRIFT: f64 = 1e-3;
-
-impl VehicleClock {
-    fn set(&mut self, vehicle: f64, wall: f64) {
-        let o = vehicle - wall;
-        self.offset = Some(match self.offset {
-            None => o,
-            Some(prev) => o.max(prev - CLOCK_DRIFT * (wall - self.set_at).max(0.0)),
-        });
-        self.set_at = wall;
-    }
-
-    fn started(&self) -> bool {
-        self.offset.is_some()
-    }
-
-    fn now(&mut self, wall: f64) -> Option<f64> {
-        let o = self.offset?;
-        self.last = self.last.max(wall + o);
-        Some(self.last)
-    }
-}
-
 /// Time constant of PX4's rate loop and rotors as the prediction models them \[s\]: the body
 /// rates and the thrust follow the setpoint as first-order lags.
 pub const RESPONSE_TIME_CONSTANT: f64 = 0.03;
@@ -304,6 +311,47 @@ pub const RESPONSE_TIME_CONSTANT: f64 = 0.03;
 /// measured rates and the setpoint in force at `s.t`, the attitude turns by the rates,
 /// velocity and position follow thrust and gravity.
 pub fn predict(s: &State, commands: &[(f64, InnerCommand)], until: f64) -> State {
+    predict_with(s, commands, until, &Response::default())
+}
+
+/// How the vehicle follows a setpoint, as [`predict_with`] models it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Response {
+    /// The body rates' and the thrust's time constant \[s\].
+    pub tau: f64,
+    /// The most the body rates change per second [rad/s^2] (the pitch authority).
+    pub max_accel: f64,
+}
+
+impl Default for Response {
+    /// [`RESPONSE_TIME_CONSTANT`], no bound on the rates' change.
+    fn default() -> Self {
+        Self {
+            tau: RESPONSE_TIME_CONSTANT,
+            max_accel: f64::INFINITY,
+        }
+    }
+}
+
+impl Response {
+    /// The response of `vehicle`: its rotors' time constant (at least
+    /// [`RESPONSE_TIME_CONSTANT`]: PX4's rate loop), its pitch authority.
+    pub fn of(vehicle: &VehicleProfile) -> Self {
+        Self {
+            tau: vehicle.rotor_tau_s.max(RESPONSE_TIME_CONSTANT),
+            max_accel: vehicle.pitch_authority(),
+        }
+    }
+}
+
+/// [`predict`] with the vehicle's `response`: the rates follow the setpoint with its time
+/// constant, changing by at most its angular acceleration.
+pub fn predict_with(
+    s: &State,
+    commands: &[(f64, InnerCommand)],
+    until: f64,
+    response: &Response,
+) -> State {
     let age = (until - s.t).clamp(0.0, MAX_PREDICTION_S);
     let steps = (age / 0.0025).ceil().max(1.0);
     let h = age / steps;
@@ -315,12 +363,17 @@ pub fn predict(s: &State, commands: &[(f64, InnerCommand)], until: f64) -> State
             .or(commands.first())
             .map_or(InnerCommand::default(), |(_, c)| *c)
     };
-    let k = 1.0 - (-h / RESPONSE_TIME_CONSTANT).exp();
+    let k = 1.0 - (-h / response.tau).exp();
+    let max_step = if response.max_accel.is_finite() {
+        response.max_accel * h
+    } else {
+        f64::INFINITY
+    };
     let mut out = *s;
     let mut c = at(s.t).thrust_c;
     for i in 0..steps as usize {
         let cmd = at(s.t + i as f64 * h);
-        out.w += (cmd.rates - out.w) * k;
+        out.w += ((cmd.rates - out.w) * k).map(|d| d.clamp(-max_step, max_step));
         c += (cmd.thrust_c - c) * k;
         let a = out.q * Vector3::new(0.0, 0.0, c) - Vector3::new(0.0, 0.0, G);
         out.p += out.v * h + a * (0.5 * h * h);
@@ -404,6 +457,16 @@ pub struct FlightReport {
     pub solver_us: report::TimeStats,
     /// Solver steps that fell back to the previous plan.
     pub fallbacks: u64,
+    /// The vehicle flown, as PX4 reported it or as given.
+    pub vehicle: Option<VehicleProfile>,
+    /// The flip as planned for it.
+    pub flip: Option<FlipPlan>,
+    /// The vehicle's clock rate over the wall clock, as estimated.
+    pub clock_rate: f64,
+    /// Jumps of the vehicle's clock seen.
+    pub clock_jumps: u32,
+    /// TIMESYNC round trips \[ms\]: the shortest and the longest of the last ones.
+    pub round_trip_ms: Option<(f64, f64)>,
 }
 
 struct Flight {
@@ -423,6 +486,7 @@ struct Flight {
     airborne: bool,
     /// The setpoints of the last [`MAX_PREDICTION_S`] (vehicle time sent, command).
     history: std::collections::VecDeque<(f64, InnerCommand)>,
+    watch: Watch,
 }
 
 /// The controller loop. See the [module documentation](self).
@@ -452,6 +516,14 @@ pub struct Pilot {
     events: Vec<Event>,
     failsafes: Vec<(Failsafe, f64)>,
     link_delay: f64,
+    round_trip: RoundTrip,
+    last_timesync: Option<f64>,
+    px4_landed: Option<LandedState>,
+    autopilot: Option<u8>,
+    vehicle: Option<VehicleProfile>,
+    sih: [Option<f64>; 5],
+    flip: Option<FlipPlan>,
+    response: Response,
     finished_at: Option<f64>,
 }
 
@@ -462,7 +534,16 @@ impl Pilot {
     /// [`PilotError`] if the configuration cannot fly ([`PilotConfig::validate`]).
     pub fn new(cfg: PilotConfig) -> Result<Self, PilotError> {
         cfg.validate()?;
-        Ok(Self {
+        let given = cfg.vehicle.clone();
+        let mut pilot = Self::waiting(cfg);
+        if let Some(v) = given {
+            pilot.set_vehicle(v, 0.0)?;
+        }
+        Ok(pilot)
+    }
+
+    fn waiting(cfg: PilotConfig) -> Self {
+        Self {
             map: cfg.thrust_map,
             param_requests: 0,
             last_param_request: None,
@@ -488,8 +569,16 @@ impl Pilot {
             events: Vec::new(),
             failsafes: Vec::new(),
             link_delay: 0.0,
+            round_trip: RoundTrip::default(),
+            last_timesync: None,
+            px4_landed: None,
+            autopilot: None,
+            vehicle: None,
+            sih: [None; 5],
+            flip: None,
+            response: Response::default(),
             finished_at: None,
-        })
+        }
     }
 
     /// The configuration.
@@ -539,7 +628,7 @@ impl Pilot {
                     .failsafes
                     .last()
                     .filter(|_| self.clock.started())
-                    .is_some_and(|(_, t)| self.clock.last - t > 1.5);
+                    .is_some_and(|(_, t)| self.clock.last().is_some_and(|l| l - t > 1.5));
                 !s.armed() && settled
             }
             _ => false,
@@ -552,24 +641,76 @@ impl Pilot {
 
     /// Handles a message received at wall time `wall` \[s\].
     pub fn on_message(&mut self, header: &MavHeader, msg: &MavMessage, wall: f64) {
-        let inbound = messages::classify(header, msg);
-        if let Inbound::Param { name, value } = inbound
-            && messages::param_name_is(&name, messages::HOVER_THRUST_PARAM)
-            && self.map.is_none()
-            && self.failure.is_none()
-        {
+        let Some(system) = self
+            .autopilot
+            .or_else(|| self.find_autopilot(header, msg, wall))
+        else {
+            return;
+        };
+        let inbound = messages::classify_from(header, msg, system);
+        if let Inbound::Param { name, value } = inbound {
+            self.on_param(&name, value, wall);
+            return;
+        }
+        if let Some((time_us, s)) = self.input.parse(&inbound) {
+            self.on_state(time_us, s, wall);
+            return;
+        }
+        if let Inbound::Landed(l) = inbound {
+            self.px4_landed = Some(l);
+            return;
+        }
+        if let Inbound::Timesync { ts1, .. } = inbound {
+            self.round_trip.on_answer(ts1 as f64 * 1e-9, wall);
+            return;
+        }
+        if let (Some(session), Some(now)) = (self.session.as_mut(), self.clock.now(wall)) {
+            let before = (session.px4_mode(), session.armed());
+            session.on_inbound(&inbound, now);
+            let after = (session.px4_mode(), session.armed());
+            // Disarmed by PX4's land detector in the landing: the mission is over.
+            if !after.1
+                && self.flight.as_ref().map(|f| f.mission.phase()) == Some(MissionPhase::Land)
+            {
+                session.finish();
+            }
+            if before != after {
+                let what = format!(
+                    "PX4: {}, {}",
+                    after.0.map_or("?".to_string(), |m| m.to_string()),
+                    if after.1 { "armed" } else { "disarmed" }
+                );
+                self.event(now, what);
+            }
+        }
+    }
+
+    /// The autopilot is the sender of the first PX4 HEARTBEAT (system 1 on a vehicle;
+    /// PX4 SITL's instance `i` is system `i + 1`); until it has come, nothing is used.
+    fn find_autopilot(&mut self, header: &MavHeader, msg: &MavMessage, wall: f64) -> Option<u8> {
+        let system = messages::px4_heartbeat_system(header, msg)?;
+        self.autopilot = Some(system);
+        let t = self.clock.now(wall).unwrap_or(0.0);
+        self.event(t, format!("PX4's autopilot: system {system}"));
+        Some(system)
+    }
+
+    /// A parameter PX4 sent: its hover thrust, or one of SIH's vehicle parameters.
+    fn on_param(&mut self, name: &[u8; 16], value: f32, wall: f64) {
+        if self.failure.is_some() {
+            return;
+        }
+        let t = self.clock.now(wall).unwrap_or(0.0);
+        if messages::param_name_is(name, messages::HOVER_THRUST_PARAM) && self.map.is_none() {
             let map = ThrustMap {
                 hover_thrust: f64::from(value),
                 g: G,
             };
-            let t = self.clock.now(wall).unwrap_or(0.0);
             match map.validate() {
                 Ok(()) => {
                     self.map = Some(map);
-                    self.event(
-                        t,
-                        format!("PX4: {} = {value}", messages::HOVER_THRUST_PARAM),
-                    );
+                    let what = format!("PX4: {} = {value}", messages::HOVER_THRUST_PARAM);
+                    self.event(t, what);
                 }
                 Err(e) => {
                     self.failure = Some(format!(
@@ -581,38 +722,94 @@ impl Pilot {
             }
             return;
         }
-        if let Some(s) = self.input.on_inbound(&inbound) {
-            self.clock.set(s.t, wall);
-            self.state = Some(s);
-            let now = self.clock.now(wall).unwrap_or(s.t);
-            // Mean delay of the states over the least delayed one (~1 s memory).
-            self.link_delay += 0.02 * ((now - s.t).clamp(0.0, MAX_PREDICTION_S) - self.link_delay);
-            if self.map.is_some() {
-                let session = self
-                    .session
-                    .get_or_insert_with(|| Session::new(self.cfg.link, now));
-                // The session's odometry clock: only accepted (newer) states count.
-                session.on_odometry(now);
-            }
-            self.log_state(&s);
+        let Some(i) = SIH_PARAMS
+            .iter()
+            .position(|p| messages::param_name_is(name, p))
+        else {
+            return;
+        };
+        if self.vehicle.is_some() {
             return;
         }
-        if matches!(inbound, Inbound::Odometry(_)) {
-            return;
+        if let Some(v) = self.sih.get_mut(i) {
+            *v = Some(f64::from(value));
         }
-        if let (Some(session), Some(now)) = (self.session.as_mut(), self.clock.now(wall)) {
-            let before = (session.px4_mode(), session.armed());
-            session.on_inbound(&inbound, now);
-            let after = (session.px4_mode(), session.armed());
-            if before != after {
-                let what = format!(
-                    "PX4: {}, {}",
-                    after.0.map_or("?".to_string(), |m| m.to_string()),
-                    if after.1 { "armed" } else { "disarmed" }
-                );
-                self.event(now, what);
+        if let [Some(a), Some(b), Some(c), Some(d), Some(e)] = self.sih {
+            let v = VehicleProfile::from_sih([a, b, c, d, e]);
+            if let Err(e) = self.set_vehicle(v, t) {
+                self.failure = Some(e.to_string());
             }
         }
+    }
+
+    /// Flies `v`: the flip planned for it, the prediction with its response.
+    fn set_vehicle(&mut self, v: VehicleProfile, t: f64) -> Result<(), ProfileError> {
+        v.validate()?;
+        let plan = plan_flip(&mut self.cfg.mission, &v, self.cfg.flip_rate)?;
+        self.event(t, format!("vehicle: {}", v.describe()));
+        if let Some(p) = plan {
+            let what = format!(
+                "flip planned at {:.1} rad/s (this vehicle: up to {:.1}), ramped at {:.0} \
+                 rad/s^2, {:.2} s, climbing in at {:.1} m/s",
+                p.rate, p.max_rate, p.accel, p.duration, p.ascend_speed
+            );
+            self.event(t, what);
+        }
+        self.response = Response::of(&v);
+        self.flip = plan;
+        self.vehicle = Some(v);
+        Ok(())
+    }
+
+    /// Whether the hover thrust and the vehicle are known: the session may start.
+    fn ready(&self) -> bool {
+        self.map.is_some() && self.vehicle.is_some() && self.failure.is_none()
+    }
+
+    /// A state stamped `time_us` arrived at `wall`: judged by the vehicle's clock, then by
+    /// its time (newer than the last), then used.
+    fn on_state(&mut self, time_us: u64, s: Option<State>, wall: f64) {
+        if let Some(st) = &s {
+            match self.clock.observe(st.t, wall) {
+                Verdict::Consistent => {}
+                Verdict::Inconsistent => {
+                    self.input.dropped += 1;
+                    return;
+                }
+                Verdict::Jumped { by } => {
+                    self.input.restart();
+                    let now = self.clock.now(wall).unwrap_or(0.0);
+                    self.event(now, format!("PX4's clock jumped by {by:+.3} s"));
+                }
+            }
+        }
+        let Some(mut s) = self.input.accept(time_us, s) else {
+            return;
+        };
+        s.t = self.clock.local(s.t);
+        self.state = Some(s);
+        let now = self.clock.now(wall).unwrap_or(s.t);
+        // Mean delay of the states over the least delayed one (~1 s memory), never more
+        // than the link's round trip shows.
+        let delay = (now - s.t).clamp(0.0, self.delay_bound());
+        self.link_delay += 0.02 * (delay - self.link_delay);
+        self.link_delay = self.link_delay.min(self.delay_bound());
+        if self.ready() {
+            let session = self
+                .session
+                .get_or_insert_with(|| Session::new(self.cfg.link, now));
+            // The session's odometry clock: only accepted (newer) states count.
+            session.on_odometry(now);
+        }
+        self.log_state(&s);
+    }
+
+    /// The most a state can be late: the link's longest recent round trip (TIMESYNC), at
+    /// least [`MIN_DELAY_BOUND_S`]; without TIMESYNC answers, [`MAX_PREDICTION_S`].
+    fn delay_bound(&self) -> f64 {
+        self.round_trip.bound().map_or(MAX_PREDICTION_S, |b| {
+            b.clamp(MIN_DELAY_BOUND_S, MAX_PREDICTION_S)
+        })
     }
 
     fn log_state(&mut self, s: &State) {
@@ -631,8 +828,17 @@ impl Pilot {
             f.pitch_turned += 0.5 * (prev.w.y + s.w.y) * (s.t - prev.t);
         }
         let height = s.p.z - f.home.z;
-        let on_ground = height < GROUND_HEIGHT_M && s.v.norm() < GROUND_SPEED_M_S;
+        let r = f.mission.reference(t);
+        let px4_on_ground = self.px4_landed == Some(LandedState::OnGround);
+        let seen = f.watch.observe(t, phase, s, &r, height, px4_on_ground);
+        let on_ground = seen.on_ground;
         f.airborne |= height > 0.3;
+        if let Some(d) = seen.deviation
+            && let Some(session) = self.session.as_mut()
+            && session.phase() == Phase::Flying
+        {
+            session.trip(Failsafe::OffMission(d));
+        }
         if on_ground && !f.on_ground && f.airborne {
             f.touchdown = Some(Touchdown {
                 t,
@@ -642,7 +848,6 @@ impl Pilot {
         }
         f.on_ground = on_ground;
         f.last_logged = Some(*s);
-        let r = f.mission.reference(t);
         let truth = QuadState {
             p: s.p,
             v: s.v,
@@ -667,11 +872,31 @@ impl Pilot {
         });
     }
 
-    /// One step of the loop at wall time `wall` \[s\]: the messages to send now.
+    /// One step of the loop at wall time `wall` \[s\]: the messages to send now, addressed
+    /// to the autopilot.
     pub fn poll(&mut self, wall: f64) -> Vec<MavMessage> {
+        let mut out = self.step(wall);
+        if let Some(system) = self.autopilot {
+            for m in &mut out {
+                messages::retarget(m, system);
+            }
+        }
+        out
+    }
+
+    fn step(&mut self, wall: f64) -> Vec<MavMessage> {
         let mut out = Vec::new();
-        if self.map.is_none() && self.failure.is_none() && self.clock.started() {
-            self.ask_hover_thrust(wall, &mut out);
+        if self.clock.started()
+            && self
+                .last_timesync
+                .is_none_or(|t| wall - t >= TIMESYNC_PERIOD_S)
+        {
+            self.last_timesync = Some(wall);
+            // Stamped with the wall clock in ns, 1 ns at least (tc1 = 0 asks).
+            out.push(messages::timesync_request(((wall * 1e9) as i64).max(1)));
+        }
+        if !self.ready() && self.failure.is_none() && self.clock.started() {
+            self.ask_params(wall, &mut out);
             return out;
         }
         let (Some(now), Some(session)) = (self.clock.now(wall), self.session.as_mut()) else {
@@ -695,9 +920,11 @@ impl Pilot {
         // After a failsafe request or the final landing, PX4 flies: once its HEARTBEAT shows
         // it out of OFFBOARD the controller stops and so does the stream (PX4 then refuses
         // OFFBOARD: nobody can switch it back onto stale setpoints). Until then the
-        // controller goes on: PX4 may still be listening.
+        // controller goes on: PX4 may still be listening. A vehicle that PX4 disarmed gets
+        // no setpoint either.
+        let armed = self.session.as_ref().is_some_and(Session::armed);
         let handed_over = matches!(phase, Phase::Failsafe(_) | Phase::Finishing | Phase::Done)
-            && px4_mode != Some(Px4Mode::Offboard);
+            && (px4_mode != Some(Px4Mode::Offboard) || !armed);
         let active = self.flight.is_some()
             && matches!(phase, Phase::Flying | Phase::Failsafe(_))
             && !handed_over;
@@ -752,23 +979,60 @@ impl Pilot {
         out
     }
 
-    /// Asks PX4 for its hover thrust once a second; gives up after five tries.
-    fn ask_hover_thrust(&mut self, wall: f64, out: &mut Vec<MavMessage>) {
+    /// Asks PX4 for its hover thrust and SIH's vehicle parameters (what is still missing)
+    /// once a second; gives up after five tries.
+    fn ask_params(&mut self, wall: f64, out: &mut Vec<MavMessage>) {
         const TRIES: u32 = 5;
         if self.last_param_request.is_some_and(|t| wall - t < 1.0) {
             return;
         }
         if self.param_requests >= TRIES {
+            self.no_answer(wall);
+            return;
+        }
+        self.param_requests += 1;
+        self.last_param_request = Some(wall);
+        if self.map.is_none() {
+            out.push(messages::param_request_read(messages::HOVER_THRUST_PARAM));
+        }
+        if self.vehicle.is_none() {
+            for (name, v) in SIH_PARAMS.iter().zip(self.sih) {
+                if v.is_none() {
+                    out.push(messages::param_request_read(name));
+                }
+            }
+        }
+    }
+
+    /// PX4 did not answer every request: no hover thrust is fatal; no vehicle is fatal for
+    /// a flip (it must be planned for the vehicle), else the prediction's defaults fly.
+    fn no_answer(&mut self, wall: f64) {
+        const TRIES: u32 = 5;
+        if self.map.is_none() {
             self.failure = Some(format!(
                 "PX4 did not answer the request for {} ({TRIES} tries); give the hover \
                  thrust (normalized thrust of a hover, 0..1) instead",
                 messages::HOVER_THRUST_PARAM
             ));
-            return;
+        } else if self.cfg.mission.kind == MissionKind::Flip {
+            self.failure = Some(
+                "PX4 did not report its vehicle (SIH_* parameters: only PX4's SIH simulation \
+                 has them), and a flip is planned for the vehicle: give its profile with \
+                 --vehicle FILE (docs/shim.md)"
+                    .to_string(),
+            );
+        } else {
+            let v = VehicleProfile {
+                source: "not reported by PX4 and not given (--vehicle): the design vehicle's \
+                         figures"
+                    .to_string(),
+                ..VehicleProfile::design()
+            };
+            let t = self.clock.now(wall).unwrap_or(0.0);
+            if let Err(e) = self.set_vehicle(v, t) {
+                self.failure = Some(e.to_string());
+            }
         }
-        self.param_requests += 1;
-        self.last_param_request = Some(wall);
-        out.push(messages::param_request_read(messages::HOVER_THRUST_PARAM));
     }
 
     /// Why the loop could not fly, if it could not start (no hover thrust).
@@ -808,6 +1072,7 @@ impl Pilot {
             on_ground: true,
             airborne: false,
             history: std::collections::VecDeque::new(),
+            watch: Watch::default(),
         });
         self.event(now, "flying: mission started".to_string());
     }
@@ -829,7 +1094,7 @@ impl Pilot {
         // the state brought forward to it.
         let acts_at = now + self.link_delay;
         let s = if self.cfg.predict {
-            predict(&s, f.history.make_contiguous(), acts_at)
+            predict_with(&s, f.history.make_contiguous(), acts_at, &self.response)
         } else {
             s
         };
@@ -913,7 +1178,7 @@ impl Pilot {
                 pose_lost_at: lost.map(|t| t - self.cfg.link.odometry_timeout - f.t0),
                 failsafe_at: self.failsafes.first().map(|(_, t)| t - f.t0),
             };
-            report::summarize(&res)
+            report::summarize_with(&res, &report::Criteria::PX4)
         });
         FlightReport {
             summary,
@@ -937,6 +1202,15 @@ impl Pilot {
             solver_period: PeriodStats::of(&self.solver_periods),
             solver_us: report::TimeStats::of(self.solver_us.iter().copied()),
             fallbacks: self.fallbacks,
+            vehicle: self.vehicle.clone(),
+            flip: self.flip,
+            clock_rate: self.clock.rate(),
+            clock_jumps: self.clock.jumps(),
+            round_trip_ms: self
+                .round_trip
+                .min()
+                .zip(self.round_trip.bound())
+                .map(|(a, b)| (a * 1e3, b * 1e3)),
         }
     }
 
@@ -946,12 +1220,9 @@ impl Pilot {
     }
 }
 
-fn failsafe_mode(f: Failsafe) -> &'static str {
-    match f {
-        Failsafe::Abort => "AUTO.LAND",
-        Failsafe::Px4LeftOffboard => "PX4's own mode",
-        Failsafe::OdometryLost | Failsafe::SolverFailures => "AUTO.RTL",
-    }
+fn failsafe_mode(f: Failsafe) -> String {
+    f.mode()
+        .map_or("PX4's own mode".to_string(), |m| m.to_string())
 }
 
 /// Runs `pilot` on `link` in real time, the wall clock being the time since `epoch` (the

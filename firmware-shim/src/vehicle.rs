@@ -22,8 +22,24 @@
 //! * Out: PX4's HEARTBEAT (1 Hz) and what PX4 streams on its onboard link, at PX4's default
 //!   rates unless the companion changes them with MAV_CMD_SET_MESSAGE_INTERVAL
 //!   ([`crate::sitl`]): ODOMETRY (30 Hz, LOCAL_NED / LOCAL_NED), LOCAL_POSITION_NED (30 Hz),
-//!   ATTITUDE_QUATERNION (50 Hz, NED -> FRD, FRD rates), EXTENDED_SYS_STATE (1 Hz), and the
-//!   commander's COMMAND_ACKs. The defaults are [`VehicleConfig`] fields.
+//!   ATTITUDE_QUATERNION (50 Hz, NED -> FRD, FRD rates), EXTENDED_SYS_STATE (5 Hz, the
+//!   land detector's verdict), and the commander's COMMAND_ACKs. The defaults are
+//!   [`VehicleConfig`] fields. Answers: TIMESYNC (a request, `tc1` = 0, gets the vehicle's
+//!   time in `tc1` and its `ts1` back, as PX4's `mavlink_timesync.cpp`) and
+//!   PARAM_REQUEST_READ for the parameters of [`SimVehicle::parameters`].
+//! * The clock: every timestamp (ODOMETRY's `time_usec`, the others' `time_boot_ms`,
+//!   TIMESYNC's `tc1`) is the simulated time, shifted after a [`ClockJump`]; [`serve`] runs
+//!   the simulation at [`VehicleConfig::clock_rate`] simulated seconds per wall-clock second
+//!   (PX4's SIH in lockstep ran 1.0-1.5 % slow: default 0.988). PX4's own timeouts (offboard
+//!   loss, land detector, auto-disarm) run on the simulated time, as in PX4.
+//! * The estimate: the estimator's noise and latency, plus EKF2's height error with GNSS
+//!   height, ramping from 0 at the first arming to [`VehicleConfig::height_bias`] over
+//!   [`HEIGHT_BIAS_RAMP`] s; PX4's own modes fly on it; the record stays true.
+//! * PX4's land detector ([`crate::sitl::LandDetector`]) on the estimate and the commanded
+//!   thrust: its verdict is EXTENDED_SYS_STATE's landed state, the commander's arming and
+//!   disarming checks and its automatic disarm 2 s after landing, in any mode.
+//! * The airframe ([`Airframe`]): the simulator's agile design vehicle (default) or PX4's
+//!   stock SIH quadrotor ([`VehicleConfig::stock`]).
 //! * [`SimVehicle::record`]: the true flight (crash, heights, touchdowns, mode changes,
 //!   arming, the pitch rotation flown in OFFBOARD), kept at every 1 ms step, for the
 //!   summary of `mpcc sitl`.
@@ -33,15 +49,116 @@ use mavlink::dialects::common::{self as mc, MavFrame, MavLandedState, MavMessage
 use mpc_sim::estimator::{Estimate, Estimator, EstimatorConfig};
 use mpc_sim::mission::attitude_from_thrust;
 use mpc_sim::plant::{Contact, Disturbance, Plant, QuadParams, QuadState};
-use mpc_sim::rate_loop::{RateController, RateGains};
+use mpc_sim::rate_loop::{RateController, RateGains, px4_torque_per_command};
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 
 use crate::frames::{enu_to_ned, flu_to_frd, frd_to_flu, quat_enu_flu_to_ned_frd, quat_to_mavlink};
 use crate::messages::Px4Mode;
 use crate::setpoint::ThrustMap;
 use crate::sitl::{
-    Commander, CommanderConfig, Control, MessageInterval, STREAMED_MESSAGES, VehicleStatus,
+    Commander, CommanderConfig, Control, LandDetector, LandDetectorConfig, LandDetectorInput,
+    MessageInterval, STREAMED_MESSAGES, VehicleStatus,
 };
+
+/// The height error of the estimate grows from 0 at the first arming to its final value
+/// over this long \[s\] (EKF2 on GNSS height drifted 0.2-0.7 m over a flight).
+pub const HEIGHT_BIAS_RAMP: f64 = 20.0;
+
+/// The slowest and the fastest vehicle clock, relative to the wall clock.
+pub const CLOCK_RATE_RANGE: (f64, f64) = (0.5, 2.0);
+
+/// The largest height bias [`VehicleConfig::validate`] accepts \[m\].
+pub const MAX_HEIGHT_BIAS: f64 = 5.0;
+
+/// A bad setting of the simulated vehicle, saying what to give instead.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum VehicleConfigError {
+    /// The clock rate is out of range.
+    #[error(
+        "clock rate {0}: give 0.5 to 2.0 vehicle seconds per wall-clock second (PX4 SITL in \
+         lockstep: about 0.988)"
+    )]
+    ClockRate(f64),
+    /// A clock jump that is not `AT:BY`.
+    #[error(
+        "clock jump `{0}`: give AT:BY in seconds, e.g. 30:-5 (at vehicle time AT >= 0, every \
+         timestamp from then on is shifted by BY, either sign)"
+    )]
+    ClockJump(String),
+    /// The height bias is not finite or too large.
+    #[error("height bias {0} m: give a bias within -5 to 5 m (PX4's EKF2 on GNSS: 0.2-0.7 m)")]
+    HeightBias(f64),
+    /// An unknown airframe name.
+    #[error(
+        "vehicle `{0}`: unknown; use agile (the simulator's design vehicle) or stock (PX4's \
+         SIH quadrotor)"
+    )]
+    Airframe(String),
+}
+
+/// A jump of the vehicle's clock (a PX4 reboot, a restarted lockstep simulation).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ClockJump {
+    /// When, in simulated time \[s\].
+    pub at: f64,
+    /// By how much every timestamp from then on is shifted \[s\] (either sign).
+    pub by: f64,
+}
+
+impl std::str::FromStr for ClockJump {
+    type Err = VehicleConfigError;
+
+    /// `AT:BY` in seconds, e.g. `30:-5`.
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        let bad = || VehicleConfigError::ClockJump(s.to_string());
+        let (at, by) = s.split_once(':').ok_or_else(bad)?;
+        let at: f64 = at.trim().parse().map_err(|_| bad())?;
+        let by: f64 = by.trim().parse().map_err(|_| bad())?;
+        let jump = Self { at, by };
+        jump.is_valid().then_some(jump).ok_or_else(bad)
+    }
+}
+
+impl ClockJump {
+    fn is_valid(&self) -> bool {
+        self.at.is_finite() && self.at >= 0.0 && self.by.is_finite()
+    }
+}
+
+/// The vehicle PX4 flies.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Airframe {
+    /// The simulator's design vehicle ([`QuadParams::default`]): thrust-to-weight 4, about
+    /// 390 rad/s^2 of pitch authority, 30 ms rotors.
+    #[default]
+    Agile,
+    /// PX4's stock SIH quadrotor ([`VehicleConfig::stock`]): 1 kg, 4 x 5 N, about
+    /// 80 rad/s^2 of pitch authority with PX4's default rate gains.
+    Stock,
+}
+
+impl std::str::FromStr for Airframe {
+    type Err = VehicleConfigError;
+
+    /// `agile` or `stock`.
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "agile" => Ok(Self::Agile),
+            "stock" => Ok(Self::Stock),
+            _ => Err(VehicleConfigError::Airframe(s.to_string())),
+        }
+    }
+}
+
+impl Airframe {
+    /// The vehicle's settings, with the other settings at their defaults.
+    pub fn config(self) -> VehicleConfig {
+        match self {
+            Self::Agile => VehicleConfig::default(),
+            Self::Stock => VehicleConfig::stock(),
+        }
+    }
+}
 
 /// Settings of the simulated vehicle.
 #[derive(Clone, Debug, PartialEq)]
@@ -50,6 +167,23 @@ pub struct VehicleConfig {
     pub commander: CommanderConfig,
     /// The vehicle (true and as the rate loop believes it).
     pub params: QuadParams,
+    /// The rate loop's gains.
+    pub rate_gains: RateGains,
+    /// Angular damping, a torque of `-angular_damping * w` (SIH_KDW) [N m s/rad].
+    pub angular_damping: f64,
+    /// What PX4 answers for MPC_THR_HOVER (and its land detector uses); `None`: the true
+    /// hover thrust of [`VehicleConfig::params`], as a calibrated airframe.
+    pub hover_thrust_param: Option<f64>,
+    /// PX4's land detector.
+    pub land_detector: LandDetectorConfig,
+    /// Simulated seconds per wall-clock second when served ([`serve`]); within
+    /// [`CLOCK_RATE_RANGE`]. PX4's SIH in lockstep ran 1.0-1.5 % slower than the wall clock.
+    pub clock_rate: f64,
+    /// A jump of the vehicle's timestamps, if any.
+    pub clock_jump: Option<ClockJump>,
+    /// The estimate's final height error (reported minus true, ENU z) \[m\]; `None`: drawn
+    /// from the seed, 0.2 to 0.7 m either way, as EKF2 on GNSS height.
+    pub height_bias: Option<f64>,
     /// Estimation noise and latency of the odometry.
     pub estimator: EstimatorConfig,
     /// Noise seed.
@@ -63,7 +197,8 @@ pub struct VehicleConfig {
     pub local_position_period: f64,
     /// Default ATTITUDE_QUATERNION period \[s\] (PX4: 50 Hz); not positive or not finite: off.
     pub attitude_quaternion_period: f64,
-    /// Default EXTENDED_SYS_STATE period \[s\] (1 Hz); not positive or not finite: off.
+    /// Default EXTENDED_SYS_STATE period \[s\] (PX4's onboard link: 5 Hz); not positive or
+    /// not finite: off.
     pub sys_state_period: f64,
     /// AUTO.LAND descent speed [m/s].
     pub land_speed: f64,
@@ -72,25 +207,97 @@ pub struct VehicleConfig {
 }
 
 impl Default for VehicleConfig {
-    /// The simulator's default quadrotor at the origin, motion-capture-like noise, PX4's
-    /// default rates on the onboard link (ODOMETRY and LOCAL_POSITION_NED 30 Hz,
-    /// ATTITUDE_QUATERNION 50 Hz, EXTENDED_SYS_STATE 1 Hz), landing at 0.5 m/s, PX4's
-    /// default attitude gains.
+    /// The simulator's default quadrotor ([`Airframe::Agile`]) at the origin, its rate gains,
+    /// no angular damping, MPC_THR_HOVER its true hover thrust, PX4's land detector,
+    /// motion-capture-like noise plus a height bias drawn from the seed, a clock 0.988 of
+    /// the wall clock's rate (PX4 SITL in lockstep) without jumps, PX4's default rates on
+    /// the onboard link (ODOMETRY and LOCAL_POSITION_NED 30 Hz, ATTITUDE_QUATERNION 50 Hz,
+    /// EXTENDED_SYS_STATE 5 Hz), landing at 0.5 m/s, PX4's default attitude gains.
     fn default() -> Self {
         Self {
             commander: CommanderConfig::default(),
             params: QuadParams::default(),
+            rate_gains: RateGains::default(),
+            angular_damping: 0.0,
+            hover_thrust_param: None,
+            land_detector: LandDetectorConfig::default(),
+            clock_rate: 0.988,
+            clock_jump: None,
+            height_bias: None,
             estimator: EstimatorConfig::noisy(),
             seed: 0,
             home: Vector3::zeros(),
             odometry_period: 1.0 / 30.0,
             local_position_period: 1.0 / 30.0,
             attitude_quaternion_period: 1.0 / 50.0,
-            sys_state_period: 1.0,
+            sys_state_period: 1.0 / 5.0,
             land_speed: 0.5,
             attitude: AttitudeGains::default(),
         }
     }
+}
+
+impl VehicleConfig {
+    /// PX4's stock SIH quadrotor (`make px4_sitl sihsim_quadx`, PX4's default parameters):
+    /// [`QuadParams::px4_sih`] (1 kg, SIH_IXX/IYY/IZZ 0.025/0.025/0.030, 4 x 5 N, lever
+    /// SIH_L_ROLL = SIH_L_PITCH = 0.2 m, SIH_T_TAU 0.05 s, SIH_KDV 1), SIH_KDW 0.025 N m s
+    /// of angular damping, PX4's default rate gains ([`RateGains::px4_default`]) and
+    /// MPC_THR_HOVER 0.5 (PX4's default; the true hover thrust is 0.4905, PX4 SITL measured
+    /// 0.495). The rest as [`VehicleConfig::default`].
+    pub fn stock() -> Self {
+        let params = QuadParams::px4_sih();
+        Self {
+            rate_gains: RateGains::px4_default(&params),
+            angular_damping: 0.025,
+            hover_thrust_param: Some(0.5),
+            params,
+            ..Self::default()
+        }
+    }
+
+    /// Checks the clock rate (within [`CLOCK_RATE_RANGE`]), the clock jump (`at` >= 0,
+    /// finite) and the height bias (within [`MAX_HEIGHT_BIAS`]).
+    ///
+    /// # Errors
+    ///
+    /// The first bad setting, saying what to give instead.
+    pub fn validate(&self) -> Result<(), VehicleConfigError> {
+        let (lo, hi) = CLOCK_RATE_RANGE;
+        if !(lo..=hi).contains(&self.clock_rate) {
+            return Err(VehicleConfigError::ClockRate(self.clock_rate));
+        }
+        if let Some(j) = self.clock_jump
+            && !j.is_valid()
+        {
+            return Err(VehicleConfigError::ClockJump(format!("{}:{}", j.at, j.by)));
+        }
+        match self.height_bias {
+            Some(b) if !(-MAX_HEIGHT_BIAS..=MAX_HEIGHT_BIAS).contains(&b) => {
+                Err(VehicleConfigError::HeightBias(b))
+            }
+            _ => Ok(()),
+        }
+    }
+
+    /// The final height bias: [`VehicleConfig::height_bias`], or drawn from the seed
+    /// (magnitude uniform in 0.2..0.7 m, either sign).
+    pub fn final_height_bias(&self) -> f64 {
+        self.height_bias
+            .unwrap_or_else(|| seeded_height_bias(self.seed))
+    }
+}
+
+/// A height bias drawn from `seed`: magnitude uniform in 0.2..0.7 m, random sign
+/// (SplitMix64, so that the estimator's noise stream is not disturbed).
+fn seeded_height_bias(seed: u64) -> f64 {
+    let mut z = seed ^ 0x5EED_B1A5_u64;
+    z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^= z >> 31;
+    let u = (z >> 11) as f64 / (1u64 << 53) as f64;
+    let magnitude = 0.2 + 0.5 * u;
+    if z & 1 == 0 { magnitude } else { -magnitude }
 }
 
 /// PX4's multicopter attitude controller parameters (mc_att_control).
@@ -232,6 +439,8 @@ pub struct TouchdownRecord {
     pub tilt: f64,
     /// Where (ENU) \[m\].
     pub position: Vector3<f64>,
+    /// The height PX4's estimate reported then (true: 0) \[m\].
+    pub estimated_height: f64,
 }
 
 /// A mode change of the simulated PX4.
@@ -287,8 +496,13 @@ pub struct FlightRecord {
     pub mode_changes: Vec<ModeChange>,
     /// When it was armed \[s\].
     pub armed_at: Vec<f64>,
-    /// When it was disarmed \[s\] (by command or by PX4 after an AUTO landing).
+    /// When it was disarmed \[s\] (by command or by PX4 on its own).
     pub disarmed_at: Vec<f64>,
+    /// When PX4 disarmed on its own, its land detector having said landed for
+    /// COM_DISARM_LAND \[s\] (in any mode).
+    pub auto_disarmed_at: Vec<f64>,
+    /// The estimate's height error now (reported minus true) \[m\].
+    pub height_bias: f64,
     /// The true position now (ENU) \[m\].
     pub final_position: Vector3<f64>,
     /// Simulated time now \[s\].
@@ -310,6 +524,8 @@ impl FlightRecord {
             mode_changes: Vec::new(),
             armed_at: Vec::new(),
             disarmed_at: Vec::new(),
+            auto_disarmed_at: Vec::new(),
+            height_bias: 0.0,
             final_position: home,
             time: 0.0,
         }
@@ -357,25 +573,32 @@ impl FlightRecord {
         if !self.disarmed_at.is_empty() {
             out.push(format!("disarmed at {}", times(&self.disarmed_at)));
         }
+        if !self.auto_disarmed_at.is_empty() {
+            out.push(format!(
+                "disarmed by PX4 after its land detector said landed (COM_DISARM_LAND) at {}",
+                times(&self.auto_disarmed_at)
+            ));
+        }
         for m in &self.mode_changes {
             out.push(format!("mode at {:.3} s: {m}", m.time));
         }
         for t in &self.touchdowns {
             out.push(format!(
                 "touchdown at {:.3} s: {:.2} m/s down, {:.2} m/s across, tilt {:.1} deg, at \
-                 ({:.2}, {:.2}) m",
+                 ({:.2}, {:.2}) m; PX4's estimate said {:.2} m high",
                 t.time,
                 t.vertical_speed,
                 t.horizontal_speed,
                 t.tilt.to_degrees(),
                 t.position.x,
-                t.position.y
+                t.position.y,
+                t.estimated_height
             ));
         }
         let p = self.final_position;
         out.push(format!(
-            "final position (ENU): ({:.2}, {:.2}, {:.2}) m",
-            p.x, p.y, p.z
+            "final position (ENU): ({:.2}, {:.2}, {:.2}) m; estimate's height error {:+.2} m",
+            p.x, p.y, p.z, self.height_bias
         ));
         out
     }
@@ -414,12 +637,26 @@ pub struct SimVehicle {
     rate: RateController,
     est: Estimator,
     commander: Commander,
+    detector: LandDetector,
     map: ThrustMap,
     t: f64,
     landed: bool,
     target: Option<Px4Target>,
+    motors: MotorDemand,
+    height_bias: f64,
     streams: Vec<Stream>,
     record: FlightRecord,
+}
+
+/// What PX4's land detector reads of the last control output.
+#[derive(Clone, Copy, Debug, Default)]
+struct MotorDemand {
+    /// Normalized collective thrust.
+    thrust: f64,
+    /// Whether PX4's own position controller flew (climb-rate control).
+    climb_rate_control: bool,
+    /// Whether it commanded a descent.
+    descending: bool,
 }
 
 const STEP: f64 = 0.001;
@@ -431,30 +668,14 @@ impl SimVehicle {
         // The hover thrust of this vehicle as PX4 would have calibrated it: hover over the
         // maximum collective thrust (linear thrust model, as PX4's).
         let hover_thrust = p.mass * p.g / (4.0 * p.rotor_thrust_max());
-        let default_period = |id: u32| match id {
-            mc::ODOMETRY_DATA::ID => positive(cfg.odometry_period),
-            mc::LOCAL_POSITION_NED_DATA::ID => positive(cfg.local_position_period),
-            mc::ATTITUDE_QUATERNION_DATA::ID => positive(cfg.attitude_quaternion_period),
-            mc::EXTENDED_SYS_STATE_DATA::ID => positive(cfg.sys_state_period),
-            _ => None,
-        };
-        let streams = STREAMED_MESSAGES
-            .iter()
-            .map(|&id| Stream {
-                id,
-                default: default_period(id),
-                period: default_period(id),
-                next: 0.0,
-                last: None,
-            })
-            .collect();
         let plant = Plant::new(p.clone(), QuadState::at_rest(cfg.home));
         let landed = plant.contact() == Contact::OnGround;
         Self {
             plant,
-            rate: RateController::new(p, RateGains::default()),
+            rate: RateController::new(p, cfg.rate_gains.clone()),
             est: Estimator::new(cfg.estimator.clone(), cfg.seed),
             commander: Commander::new(cfg.commander),
+            detector: LandDetector::new(cfg.land_detector),
             map: ThrustMap {
                 hover_thrust,
                 g: p.g,
@@ -462,20 +683,41 @@ impl SimVehicle {
             t: 0.0,
             landed,
             target: None,
-            streams,
+            motors: MotorDemand::default(),
+            height_bias: cfg.final_height_bias(),
+            streams: streams(&cfg),
             record: FlightRecord::new(cfg.home),
             cfg,
         }
     }
 
-    /// The thrust map a client must use for this vehicle.
+    /// The settings.
+    pub fn config(&self) -> &VehicleConfig {
+        &self.cfg
+    }
+
+    /// The thrust map a client must use for this vehicle (its true hover thrust).
     pub fn thrust_map(&self) -> ThrustMap {
         self.map
+    }
+
+    /// What PX4 answers for MPC_THR_HOVER.
+    pub fn hover_thrust_param(&self) -> f64 {
+        self.cfg.hover_thrust_param.unwrap_or(self.map.hover_thrust)
     }
 
     /// Simulated time \[s\].
     pub fn time(&self) -> f64 {
         self.t
+    }
+
+    /// The vehicle's clock now, as its timestamps show it \[s\]: the simulated time, shifted
+    /// by the [`ClockJump`] once it has happened.
+    pub fn clock(&self) -> f64 {
+        match self.cfg.clock_jump {
+            Some(j) if self.t >= j.at => self.t + j.by,
+            _ => self.t,
+        }
     }
 
     /// The true state (ENU/FLU).
@@ -486,6 +728,11 @@ impl SimVehicle {
     /// The commander.
     pub fn commander(&self) -> &Commander {
         &self.commander
+    }
+
+    /// PX4's land detector.
+    pub fn land_detector(&self) -> &LandDetector {
+        &self.detector
     }
 
     /// Whether the plant crashed.
@@ -516,12 +763,18 @@ impl SimVehicle {
                 self.record.disarmed_at.push(self.t);
             }
         }
+        let auto = self.commander.auto_disarmed_at();
+        if auto.len() > self.record.auto_disarmed_at.len() {
+            self.record.auto_disarmed_at = auto.to_vec();
+        }
     }
 
     /// A message from the companion; returns PX4's answers.
     pub fn handle(&mut self, msg: &MavMessage) -> Vec<MavMessage> {
-        if let MavMessage::PARAM_REQUEST_READ(r) = msg {
-            return self.param_value(r);
+        match msg {
+            MavMessage::PARAM_REQUEST_READ(r) => return self.param_value(r),
+            MavMessage::TIMESYNC(ts) => return self.timesync(ts),
+            _ => {}
         }
         let (mode, armed) = (self.commander.mode(), self.commander.armed());
         let out = self.commander.on_message(msg, self.t);
@@ -529,20 +782,80 @@ impl SimVehicle {
         out
     }
 
-    /// PARAM_VALUE for a PARAM_REQUEST_READ: this vehicle has one parameter,
-    /// `MPC_THR_HOVER` (its hover thrust, index 0); PX4 does not answer a request for a
-    /// parameter it does not have, nor does this.
-    fn param_value(&self, r: &mc::PARAM_REQUEST_READ_DATA) -> Vec<MavMessage> {
-        let by_name =
-            crate::messages::param_name_is(&r.param_id.into(), crate::messages::HOVER_THRUST_PARAM);
-        if !(by_name || r.param_index == 0) {
+    /// PX4's `MavlinkTimesync`: a request (`tc1` = 0) is answered with the vehicle's time
+    /// \[ns\] in `tc1` and the request's `ts1`; an answer (`tc1` != 0) is not.
+    fn timesync(&self, ts: &mc::TIMESYNC_DATA) -> Vec<MavMessage> {
+        if ts.tc1 != 0 {
             return Vec::new();
         }
+        vec![MavMessage::TIMESYNC(mc::TIMESYNC_DATA {
+            tc1: (self.clock().max(0.0) * 1e9) as i64,
+            ts1: ts.ts1,
+        })]
+    }
+
+    /// The parameters this vehicle answers PARAM_REQUEST_READ for, in index order, with
+    /// the values PX4 SITL would have for it: MPC_THR_HOVER, MPC_THR_MIN, MPC_MANTHR_MIN,
+    /// MC_ROLLRATE_P, MC_PITCHRATE_P (PX4's normalized gains:
+    /// `kp * inertia / px4_torque_per_command`), MC_ROLLRATE_MAX, MC_PITCHRATE_MAX
+    /// \[deg/s\], SIH_MASS, SIH_IXX, SIH_IYY, SIH_IZZ, SIH_T_MAX (per rotor), SIH_Q_MAX
+    /// (per rotor), SIH_L_ROLL, SIH_L_PITCH (the rotors' lever, `arm / sqrt(2)`),
+    /// SIH_T_TAU, SIH_KDV, SIH_KDW, COM_DISARM_LAND, LNDMC_TRIG_TIME, LNDMC_Z_VEL_MAX.
+    pub fn parameters(&self) -> Vec<(&'static str, f64)> {
+        let p = &self.cfg.params;
+        let t_max = p.rotor_thrust_max();
+        let lever = p.arm * std::f64::consts::FRAC_1_SQRT_2;
+        let per_cmd = px4_torque_per_command(p);
+        let kp = &self.cfg.rate_gains.kp;
+        let max_rates = self.cfg.attitude.max_rates.map(f64::to_degrees);
+        let ld = &self.cfg.land_detector;
+        vec![
+            ("MPC_THR_HOVER", self.hover_thrust_param()),
+            ("MPC_THR_MIN", ld.thr_min),
+            ("MPC_MANTHR_MIN", ld.man_thr_min),
+            ("MC_ROLLRATE_P", kp.x * p.inertia.x / per_cmd.x),
+            ("MC_PITCHRATE_P", kp.y * p.inertia.y / per_cmd.y),
+            ("MC_ROLLRATE_MAX", max_rates.x),
+            ("MC_PITCHRATE_MAX", max_rates.y),
+            ("SIH_MASS", p.mass),
+            ("SIH_IXX", p.inertia.x),
+            ("SIH_IYY", p.inertia.y),
+            ("SIH_IZZ", p.inertia.z),
+            ("SIH_T_MAX", t_max),
+            ("SIH_Q_MAX", p.k_torque * t_max),
+            ("SIH_L_ROLL", lever),
+            ("SIH_L_PITCH", lever),
+            ("SIH_T_TAU", p.rotor_tau),
+            ("SIH_KDV", p.drag.x),
+            ("SIH_KDW", self.cfg.angular_damping),
+            ("COM_DISARM_LAND", self.cfg.commander.disarm_land_delay),
+            ("LNDMC_TRIG_TIME", ld.trigger_time),
+            ("LNDMC_Z_VEL_MAX", ld.z_vel_max),
+        ]
+    }
+
+    /// PARAM_VALUE for a PARAM_REQUEST_READ, as PX4: by name when `param_index` is -1, else
+    /// by index; REAL32, with the index and the count of [`SimVehicle::parameters`]. PX4
+    /// does not answer a request for a parameter it does not have, nor does this.
+    fn param_value(&self, r: &mc::PARAM_REQUEST_READ_DATA) -> Vec<MavMessage> {
+        let table = self.parameters();
+        let found = if r.param_index < 0 {
+            table
+                .iter()
+                .position(|(n, _)| crate::messages::param_name_is(&r.param_id.into(), n))
+        } else {
+            usize::try_from(r.param_index)
+                .ok()
+                .filter(|&i| i < table.len())
+        };
+        let Some((index, &(name, value))) = found.and_then(|i| table.get(i).map(|e| (i, e))) else {
+            return Vec::new();
+        };
         vec![MavMessage::PARAM_VALUE(mc::PARAM_VALUE_DATA {
-            param_value: self.map.hover_thrust as f32,
-            param_count: 1,
-            param_index: 0,
-            param_id: crate::messages::HOVER_THRUST_PARAM.into(),
+            param_value: value as f32,
+            param_count: table.len() as u16,
+            param_index: index as u16,
+            param_id: name.into(),
             param_type: mc::MavParamType::MAV_PARAM_TYPE_REAL32,
         })]
     }
@@ -605,80 +918,139 @@ impl SimVehicle {
         target
     }
 
+    /// The estimator's estimate now, with EKF2's height error.
+    fn estimate(&mut self) -> Estimate {
+        let truth = self.plant.state().clone();
+        let mut e = self.est.update(self.t, &truth);
+        e.p.z += self.height_bias_now();
+        e
+    }
+
+    /// The height error now: 0 until the first arming, then ramping to the final bias over
+    /// [`HEIGHT_BIAS_RAMP`].
+    fn height_bias_now(&self) -> f64 {
+        let Some(&t0) = self.record.armed_at.first() else {
+            return 0.0;
+        };
+        self.height_bias * ((self.t - t0) / HEIGHT_BIAS_RAMP).clamp(0.0, 1.0)
+    }
+
+    /// PX4's land detector on estimate `e` and the last control output.
+    fn detect_landing(&mut self, e: &Estimate) -> bool {
+        let input = LandDetectorInput {
+            armed: self.commander.armed(),
+            thrust: self.motors.thrust,
+            hover_thrust: self.hover_thrust_param(),
+            climb_rate_control: self.motors.climb_rate_control,
+            descending: self.motors.descending,
+            vz: e.v.z,
+            v_xy: e.v.xy().norm(),
+            rate_xy: e.w.xy().norm(),
+        };
+        self.detector.update(self.t, &input)
+    }
+
+    /// Body rates (FLU; `None`: motors off) and collective acceleration for `control`.
+    fn fly(&mut self, control: Control, e: &Estimate) -> (Option<Vector3<f64>>, f64) {
+        let (rates, c, motors) = match control {
+            Control::Disarmed => (None, 0.0, MotorDemand::default()),
+            Control::Offboard(sp) => {
+                let r = sp.rates_frd.map(f64::from);
+                let thrust = f64::from(sp.thrust);
+                let motors = MotorDemand {
+                    thrust,
+                    ..MotorDemand::default()
+                };
+                let rates = frd_to_flu(&Vector3::new(r[0], r[1], r[2]));
+                (Some(rates), self.map.acceleration(thrust), motors)
+            }
+            Control::Px4(mode) => return self.fly_px4(mode, e),
+        };
+        self.target = None;
+        self.motors = motors;
+        (rates, c)
+    }
+
+    /// PX4's own `mode` (hold, land, return) on estimate `e`.
+    fn fly_px4(&mut self, mode: Px4Mode, e: &Estimate) -> (Option<Vector3<f64>>, f64) {
+        let target = self.px4_target(mode, e);
+        let (p_ref, v_ref) = if target.descending {
+            let v = Vector3::new(0.0, 0.0, -self.cfg.land_speed);
+            (Vector3::new(target.point.x, target.point.y, e.p.z), v)
+        } else {
+            (target.point, Vector3::zeros())
+        };
+        let (rates, c) = if self.landed && target.descending {
+            (None, 0.0)
+        } else {
+            let (r, c) = self.position_control(e, &p_ref, &v_ref, target.yaw);
+            (Some(r), c)
+        };
+        self.motors = MotorDemand {
+            thrust: self.map.thrust(c).clamp(0.0, 1.0),
+            climb_rate_control: true,
+            descending: target.descending,
+        };
+        (rates, c)
+    }
+
     /// Advances by `duration` seconds (1 kHz steps); returns PX4's messages of that time.
     pub fn step(&mut self, duration: f64) -> Vec<MavMessage> {
         let mut out = Vec::new();
         let steps = (duration / STEP).round().max(1.0) as usize;
         for _ in 0..steps {
-            let truth = self.plant.state().clone();
-            let e = self.est.update(self.t, &truth);
-            let status = VehicleStatus {
-                pose_valid: e.pose_valid,
-                landed: self.landed,
-            };
-            let (mode, armed) = (self.commander.mode(), self.commander.armed());
-            let (control, msgs) = self.commander.tick(self.t, status);
-            self.note_commander(mode, armed, true);
-            out.extend(msgs);
-            let offboard = matches!(control, Control::Offboard(_));
-            let (rates, c) = match control {
-                Control::Disarmed => {
-                    self.target = None;
-                    (None, 0.0)
-                }
-                Control::Offboard(sp) => {
-                    self.target = None;
-                    let r = sp.rates_frd.map(f64::from);
-                    (
-                        Some(frd_to_flu(&Vector3::new(r[0], r[1], r[2]))),
-                        self.map.acceleration(f64::from(sp.thrust)),
-                    )
-                }
-                Control::Px4(mode) => {
-                    let target = self.px4_target(mode, &e);
-                    let (p_ref, v_ref) = if target.descending {
-                        let v = Vector3::new(0.0, 0.0, -self.cfg.land_speed);
-                        (Vector3::new(target.point.x, target.point.y, e.p.z), v)
-                    } else {
-                        (target.point, Vector3::zeros())
-                    };
-                    if self.landed && target.descending {
-                        (None, 0.0)
-                    } else {
-                        let (r, c) = self.position_control(&e, &p_ref, &v_ref, target.yaw);
-                        (Some(r), c)
-                    }
-                }
-            };
-            let rotor_cmd = match rates {
-                Some(r) => {
-                    let thrust = self.cfg.params.mass * c;
-                    self.rate.update(&r, thrust, &e.w, STEP).rotor_cmd
-                }
-                None => {
-                    self.rate.reset();
-                    [0.0; 4]
-                }
-            };
-            let contact = self.plant.step(&rotor_cmd, &Disturbance::default(), STEP);
-            match contact {
-                Contact::OnGround | Contact::Touchdown { .. } => self.landed = true,
-                Contact::Airborne => self.landed = false,
-                Contact::Crash { .. } => {}
-            }
-            self.t += STEP;
-            self.note_step(contact, offboard);
-            self.stream(&e, &mut out);
+            self.step_once(&mut out);
         }
         out
     }
 
-    /// Updates the flight record after a step that ended in `contact`.
-    fn note_step(&mut self, contact: Contact, offboard: bool) {
+    /// One 1 ms step.
+    fn step_once(&mut self, out: &mut Vec<MavMessage>) {
+        let e = self.estimate();
+        let status = VehicleStatus {
+            pose_valid: e.pose_valid,
+            landed: self.detect_landing(&e),
+        };
+        let (mode, armed) = (self.commander.mode(), self.commander.armed());
+        let (control, msgs) = self.commander.tick(self.t, status);
+        self.note_commander(mode, armed, true);
+        out.extend(msgs);
+        let offboard = matches!(control, Control::Offboard(_));
+        let (rates, c) = self.fly(control, &e);
+        let rotor_cmd = match rates {
+            Some(r) => {
+                let thrust = self.cfg.params.mass * c;
+                self.rate.update(&r, thrust, &e.w, STEP).rotor_cmd
+            }
+            None => {
+                self.rate.reset();
+                [0.0; 4]
+            }
+        };
+        let damping = Disturbance {
+            torque: -self.cfg.angular_damping * self.plant.state().w,
+            ..Disturbance::default()
+        };
+        let contact = self.plant.step(&rotor_cmd, &damping, STEP);
+        match contact {
+            Contact::OnGround | Contact::Touchdown { .. } => self.landed = true,
+            Contact::Airborne => self.landed = false,
+            Contact::Crash { .. } => {}
+        }
+        self.t += STEP;
+        self.note_step(contact, offboard, e.p.z);
+        self.stream(&e, out);
+    }
+
+    /// Updates the flight record after a step that ended in `contact`; `estimated_z` is the
+    /// height PX4's estimate reported.
+    fn note_step(&mut self, contact: Contact, offboard: bool, estimated_z: f64) {
         let s = self.plant.state();
+        let bias = self.height_bias_now();
         let r = &mut self.record;
         r.time = self.t;
         r.final_position = s.p;
+        r.height_bias = bias;
         match contact {
             Contact::Airborne => {
                 r.airborne_time += STEP;
@@ -697,6 +1069,7 @@ impl SimVehicle {
                 horizontal_speed,
                 tilt,
                 position: s.p,
+                estimated_height: estimated_z,
             }),
             Contact::Crash {
                 reason,
@@ -757,9 +1130,22 @@ impl SimVehicle {
         }
     }
 
+    /// EXTENDED_SYS_STATE's landed state, as PX4's stream: the land detector's verdict;
+    /// airborne while PX4 itself lands, LANDING.
+    fn landed_state(&self) -> MavLandedState {
+        if self.detector.landed() {
+            MavLandedState::MAV_LANDED_STATE_ON_GROUND
+        } else if self.target.is_some_and(|t| t.descending) {
+            MavLandedState::MAV_LANDED_STATE_LANDING
+        } else {
+            MavLandedState::MAV_LANDED_STATE_IN_AIR
+        }
+    }
+
     /// Streamed message `id` now, from estimate `e`.
     fn message(&self, id: u32, e: &Estimate) -> MavMessage {
-        let time_boot_ms = (self.t * 1e3).round() as u32;
+        let clock = self.clock().max(0.0);
+        let time_boot_ms = (clock * 1e3).round() as u32;
         match id {
             mc::LOCAL_POSITION_NED_DATA::ID => {
                 let p = enu_to_ned(&e.p);
@@ -791,16 +1177,33 @@ impl SimVehicle {
             mc::EXTENDED_SYS_STATE_DATA::ID => {
                 MavMessage::EXTENDED_SYS_STATE(mc::EXTENDED_SYS_STATE_DATA {
                     vtol_state: MavVtolState::MAV_VTOL_STATE_UNDEFINED,
-                    landed_state: if self.landed {
-                        MavLandedState::MAV_LANDED_STATE_ON_GROUND
-                    } else {
-                        MavLandedState::MAV_LANDED_STATE_IN_AIR
-                    },
+                    landed_state: self.landed_state(),
                 })
             }
-            _ => odometry(e, self.t),
+            _ => odometry(e, clock),
         }
     }
+}
+
+/// The streams of `cfg` at their default rates.
+fn streams(cfg: &VehicleConfig) -> Vec<Stream> {
+    let default_period = |id: u32| match id {
+        mc::ODOMETRY_DATA::ID => positive(cfg.odometry_period),
+        mc::LOCAL_POSITION_NED_DATA::ID => positive(cfg.local_position_period),
+        mc::ATTITUDE_QUATERNION_DATA::ID => positive(cfg.attitude_quaternion_period),
+        mc::EXTENDED_SYS_STATE_DATA::ID => positive(cfg.sys_state_period),
+        _ => None,
+    };
+    STREAMED_MESSAGES
+        .iter()
+        .map(|&id| Stream {
+            id,
+            default: default_period(id),
+            period: default_period(id),
+            next: 0.0,
+            last: None,
+        })
+        .collect()
 }
 
 /// ODOMETRY as PX4 sends it: LOCAL_NED position and velocity, NED->FRD attitude, FRD rates.
@@ -826,9 +1229,11 @@ fn odometry(e: &Estimate, t: f64) -> MavMessage {
     })
 }
 
-/// Serves `vehicle` on `link` in real time (the vehicle's clock follows the wall clock in
-/// 4 ms steps, as PX4's SIH at 250 Hz) until `duration` seconds have passed or `stop` is
-/// set: what arrives is handled at once, what the vehicle sends goes out as it is produced.
+/// Serves `vehicle` on `link` in real time (the simulation follows the wall clock at
+/// [`VehicleConfig::clock_rate`] simulated seconds per wall-clock second, clamped to
+/// [`CLOCK_RATE_RANGE`], in 4 ms steps, as PX4's SIH at 250 Hz) until `duration` wall-clock
+/// seconds have passed or `stop` is set: what arrives is handled at once, what the vehicle
+/// sends goes out as it is produced.
 /// Sending before anyone has been heard on a `udpin` link fails; such messages are dropped
 /// (PX4 does the same until a client appears). Returns the number of messages received.
 pub fn serve(
@@ -853,6 +1258,10 @@ pub fn serve_with(
     const TICK: f64 = 0.004;
     let start = Instant::now();
     let t0 = vehicle.time();
+    let rate = vehicle
+        .config()
+        .clock_rate
+        .clamp(CLOCK_RATE_RANGE.0, CLOCK_RATE_RANGE.1);
     let mut received = 0;
     while !stop.load(std::sync::atomic::Ordering::Relaxed) {
         let now = start.elapsed().as_secs_f64();
@@ -865,8 +1274,8 @@ pub fn serve_with(
                 let _ = link.send(&reply);
             }
         }
-        // Catch up with the wall clock, 4 ms at a time.
-        while vehicle.time() - t0 + TICK <= now + 1e-9 {
+        // Catch up with the wall clock at the vehicle's rate, 4 ms at a time.
+        while vehicle.time() - t0 + TICK <= rate * now + 1e-9 {
             for m in vehicle.step(TICK) {
                 let _ = link.send(&m);
             }

@@ -1,6 +1,6 @@
 //! The offboard session against PX4's rules, with a scripted PX4 and a fake clock.
 
-use firmware_shim::link::{Failsafe, LinkConfig, Phase, Session, SessionError};
+use firmware_shim::link::{Deviation, Failsafe, LinkConfig, Phase, Session, SessionError};
 use firmware_shim::messages::{Inbound, OdometryNed, Px4Mode};
 use mavlink::dialects::common::{MavCmd, MavMessage};
 
@@ -429,4 +429,70 @@ fn an_acknowledged_command_the_heartbeat_never_shows_is_asked_again_then_fails()
         s.phase(),
         Phase::Failed(SessionError::NotConfirmed(MavCmd::MAV_CMD_DO_SET_MODE))
     );
+}
+
+#[test]
+fn a_disarm_by_px4_in_flight_stops_the_mission_without_a_mode_request() {
+    let mut s = Session::new(LinkConfig::default(), 0.0);
+    let mut px4 = Px4::new();
+    run(&mut s, &mut px4, 0.0, 3.0);
+    assert_eq!(s.phase(), Phase::Flying);
+    // PX4's land detector (or a kill switch) disarms it in OFFBOARD.
+    px4.armed = false;
+    px4.answer(&mut s, &[], 3.0);
+    let t = s.tick(3.01);
+    assert_eq!(t.failsafe, Some(Failsafe::Px4Disarmed));
+    assert!(!t.mpc_in_control);
+    assert!(
+        commands(&t.send).is_empty(),
+        "no mode asked of a disarmed PX4"
+    );
+    assert_eq!(s.phase(), Phase::Failsafe(Failsafe::Px4Disarmed));
+}
+
+#[test]
+fn a_landing_is_done_when_px4_disarms_even_before_it_shows_auto_land() {
+    let mut s = Session::new(LinkConfig::default(), 0.0);
+    let mut px4 = Px4 {
+        acks: true,
+        ..Px4::new()
+    };
+    run(&mut s, &mut px4, 0.0, 3.0);
+    s.finish();
+    let t = s.tick(3.0);
+    assert_eq!(
+        commands(&t.send).first().map(|c| c.0),
+        Some(MavCmd::MAV_CMD_DO_SET_MODE)
+    );
+    assert_eq!(s.phase(), Phase::Finishing);
+    // PX4's land detector disarmed it in OFFBOARD; the AUTO.LAND request is never shown.
+    px4.shows = false;
+    px4.armed = false;
+    px4.answer(&mut s, &[], 3.05);
+    s.tick(3.1);
+    assert_eq!(s.phase(), Phase::Done);
+}
+
+#[test]
+fn off_mission_trips_ask_for_auto_land_only_while_flying() {
+    let mut s = Session::new(LinkConfig::default(), 0.0);
+    let mut px4 = Px4::new();
+    let f = Failsafe::OffMission(Deviation::Inverted);
+    s.trip(f);
+    run(&mut s, &mut px4, 0.0, 3.0);
+    assert_eq!(
+        s.phase(),
+        Phase::Flying,
+        "a trip before the flight is ignored"
+    );
+    s.trip(f);
+    let t = s.tick(3.0);
+    assert_eq!(t.failsafe, Some(f));
+    let modes = param3(&t.send);
+    assert_eq!(
+        commands(&t.send).first().map(|c| (c.0, c.1 as u8)),
+        Some((MavCmd::MAV_CMD_DO_SET_MODE, 4))
+    );
+    assert_eq!(modes.first().map(|p| *p as u8), Some(6), "AUTO.LAND");
+    assert_eq!(f.mode(), Some(Px4Mode::Land));
 }

@@ -300,3 +300,69 @@ fn bad_frames_are_errors() {
     frame[last] ^= 0x5a;
     assert!(decode(&frame).is_err(), "a corrupted CRC is refused");
 }
+
+fn from(system_id: u8, component_id: u8) -> MavHeader {
+    MavHeader {
+        system_id,
+        component_id,
+        sequence: 0,
+    }
+}
+
+#[test]
+fn px4_sitl_instance_i_is_system_i_plus_1_and_nothing_else_is_taken_for_it() {
+    let hb = px4_heartbeat(true, 0);
+    // PX4 SITL's instance 5: system 6.
+    assert_eq!(m::px4_heartbeat_system(&from(6, 1), &hb), Some(6));
+    assert_eq!(m::px4_heartbeat_system(&from(6, 0), &hb), None);
+    assert_eq!(m::px4_heartbeat_system(&from(6, 1), &heartbeat()), None);
+    let Inbound::Heartbeat { armed, .. } = m::classify_from(&from(6, 1), &hb, 6) else {
+        panic!("PX4's heartbeat as system 6");
+    };
+    assert!(armed);
+    // Another system's heartbeat and state are ignored once the autopilot is known.
+    assert_eq!(m::classify_from(&from(1, 1), &hb, 6), Inbound::Ignored);
+    let ts = MavMessage::TIMESYNC(mc::TIMESYNC_DATA { tc1: 5, ts1: 7 });
+    assert_eq!(m::classify_from(&from(1, 1), &ts, 6), Inbound::Ignored);
+    assert_eq!(
+        m::classify_from(&from(6, 1), &ts, 6),
+        Inbound::Timesync { tc1: 5, ts1: 7 }
+    );
+}
+
+#[test]
+fn timesync_requests_carry_tc1_zero_and_requests_are_not_answers() {
+    let MavMessage::TIMESYNC(t) = m::timesync_request(123_456_789) else {
+        panic!("a TIMESYNC");
+    };
+    assert_eq!((t.tc1, t.ts1), (0, 123_456_789));
+    // A request from PX4 (tc1 = 0) is not an answer to ours.
+    let req = m::timesync_request(1);
+    assert_eq!(classify(&from(1, 1), &req), Inbound::Ignored);
+    // Through the wire and an independent decoder's id: TIMESYNC is message 111.
+    let bytes = encode(our_header(1, 0), &m::timesync_request(42)).unwrap();
+    let (_, _, _, id, _) = parse_v2(&bytes, 34);
+    assert_eq!(id, 111);
+}
+
+#[test]
+fn what_we_send_is_addressed_to_the_autopilot_we_locked_on() {
+    let mut msgs = vec![
+        set_attitude_target([0.0; 3], 0.5, 0),
+        command_long(Command::Arm, 0),
+        m::param_request_read(m::HOVER_THRUST_PARAM),
+    ];
+    for msg in &mut msgs {
+        m::retarget(msg, 6);
+    }
+    let targets: Vec<u8> = msgs
+        .iter()
+        .map(|msg| match msg {
+            MavMessage::SET_ATTITUDE_TARGET(s) => s.target_system,
+            MavMessage::COMMAND_LONG(c) => c.target_system,
+            MavMessage::PARAM_REQUEST_READ(p) => p.target_system,
+            _ => 0,
+        })
+        .collect();
+    assert_eq!(targets, [6, 6, 6]);
+}

@@ -6,7 +6,7 @@
 //! to the hover-thrust request, through an odometry blackout (AUTO.RTL) and aborted
 //! (AUTO.LAND).
 
-use std::f64::consts::FRAC_1_SQRT_2;
+use std::f64::consts::{FRAC_1_SQRT_2, PI};
 
 use firmware_shim::link::{Failsafe, Phase};
 use firmware_shim::messages::{self, Inbound, OdometryNed, Px4Mode, classify};
@@ -14,8 +14,9 @@ use firmware_shim::pilot::{
     MAX_PREDICTION_S, ODOMETRY_PREFERENCE_US, PAIR_WINDOW_US, PeriodStats, Pilot, PilotConfig,
     PilotError, RESPONSE_TIME_CONSTANT, State, StateInput, predict,
 };
+use firmware_shim::profile::VehicleProfile;
 use firmware_shim::setpoint::{RateLimits, SetpointError, ThrustMap};
-use firmware_shim::vehicle::{SimVehicle, VehicleConfig};
+use firmware_shim::vehicle::{ClockJump, SimVehicle, VehicleConfig};
 use mavlink::MavHeader;
 use mavlink::dialects::common::{self as mc, MavCmd, MavFrame, MavMessage};
 use mpc_sim::controller::InnerCommand;
@@ -628,7 +629,11 @@ fn period_stats_of_nothing_are_the_default() {
 fn hover_config() -> PilotConfig {
     let mut mission = MissionConfig::for_kind(MissionKind::Hover);
     mission.hover_time = 2.0;
-    PilotConfig::new(mission)
+    // The vehicle given, so that PX4 is asked for nothing but its hover thrust.
+    PilotConfig {
+        vehicle: Some(VehicleProfile::design()),
+        ..PilotConfig::new(mission)
+    }
 }
 
 #[test]
@@ -728,21 +733,36 @@ struct Lockstep {
     block_param_requests: bool,
     /// When the last ODOMETRY reached the pilot.
     last_odometry: Option<f64>,
+    /// The vehicle's clock over the pilot's wall clock.
+    clock_rate: f64,
 }
 
 impl Lockstep {
     fn new(cfg: PilotConfig, seed: u64) -> Self {
-        Self {
-            pilot: Pilot::new(cfg).unwrap(),
-            vehicle: SimVehicle::new(VehicleConfig {
+        Self::with_vehicle(
+            cfg,
+            VehicleConfig {
                 seed,
                 ..VehicleConfig::default()
-            }),
+            },
+        )
+    }
+
+    fn with_vehicle(cfg: PilotConfig, vehicle: VehicleConfig) -> Self {
+        Self {
+            pilot: Pilot::new(cfg).unwrap(),
+            vehicle: SimVehicle::new(vehicle),
             sent: Vec::new(),
             block_states: false,
             block_param_requests: false,
             last_odometry: None,
+            clock_rate: 1.0,
         }
+    }
+
+    /// The pilot's wall clock.
+    fn wall(&self) -> f64 {
+        self.vehicle.time() / self.clock_rate
     }
 
     fn t(&self) -> f64 {
@@ -751,7 +771,7 @@ impl Lockstep {
 
     fn step(&mut self) {
         let msgs = self.vehicle.step(0.001);
-        let t = self.vehicle.time();
+        let (t, wall) = (self.vehicle.time(), self.wall());
         for m in msgs {
             if self.block_states && is_state(&m) {
                 continue;
@@ -759,15 +779,15 @@ impl Lockstep {
             if matches!(m, MavMessage::ODOMETRY(_)) {
                 self.last_odometry = Some(t);
             }
-            self.pilot.on_message(&PX4, &m, t);
+            self.pilot.on_message(&PX4, &m, wall);
         }
-        for m in self.pilot.poll(t) {
+        for m in self.pilot.poll(wall) {
             self.sent.push((t, m.clone()));
             if self.block_param_requests && matches!(m, MavMessage::PARAM_REQUEST_READ(_)) {
                 continue;
             }
             for r in self.vehicle.handle(&m) {
-                self.pilot.on_message(&PX4, &r, t);
+                self.pilot.on_message(&PX4, &r, wall);
             }
         }
     }
@@ -943,12 +963,15 @@ fn a_hover_mission_flies_in_lockstep_with_the_simulated_px4() {
         (n - expected).abs() <= 0.02 * expected,
         "{n} setpoints vs {expected}"
     );
+    // From arming until the stream stops (PX4's HEARTBEAT shows AUTO.LAND; PX4 then lands
+    // and disarms on its own, its land detector taking a few seconds on the ground).
     let (armed, disarmed) = (r.armed_at[0], *r.disarmed_at.last().unwrap());
-    let in_flight = times
-        .iter()
-        .filter(|t| (armed..disarmed).contains(*t))
-        .count() as f64;
-    let expected = (disarmed - armed) * rate;
+    assert!(
+        last < disarmed,
+        "setpoints after the disarm: {last} s, {disarmed} s"
+    );
+    let in_flight = times.iter().filter(|t| **t >= armed).count() as f64 - 1.0;
+    let expected = (last - armed) * rate;
     assert!(
         (in_flight - expected).abs() <= 0.02 * expected,
         "{in_flight} setpoints armed vs {expected}"
@@ -988,9 +1011,14 @@ fn no_answer_to_the_hover_thrust_request_fails_after_five_seconds() {
     assert!(first < 0.01, "asked at {first}");
     let waited = finished_at - first;
     assert!((4.99..5.01).contains(&waited), "gave up after {waited} s");
-    // Nothing else went out: no session, no setpoint, no command.
+    // Nothing else went out but TIMESYNC requests: no session, no setpoint, no command.
     assert_eq!(ls.setpoints().count(), 0);
-    assert_eq!(ls.sent.len(), requests.len());
+    let others = ls
+        .sent
+        .iter()
+        .filter(|(_, m)| !matches!(m, MavMessage::TIMESYNC(_)))
+        .count();
+    assert_eq!(others, requests.len());
     assert_eq!(ls.pilot.session(), None);
     assert_eq!(ls.pilot.thrust_map(), None);
     assert!(ls.vehicle.record().armed_at.is_empty());
@@ -1008,8 +1036,25 @@ fn an_unusable_or_foreign_hover_thrust_parameter_is_not_used() {
             param_type: mc::MavParamType::MAV_PARAM_TYPE_REAL32,
         })
     };
-    // From another component: ignored.
+    // PX4's HEARTBEAT names the autopilot; what comes before it is not used.
+    let heartbeat = MavMessage::HEARTBEAT(mc::HEARTBEAT_DATA {
+        custom_mode: 0,
+        mavtype: mc::MavType::MAV_TYPE_QUADROTOR,
+        autopilot: mc::MavAutopilot::MAV_AUTOPILOT_PX4,
+        base_mode: mc::MavModeFlag::empty(),
+        system_status: mc::MavState::MAV_STATE_STANDBY,
+        mavlink_version: 3,
+    });
+    let new_pilot = || {
+        let mut p = Pilot::new(hover_config()).unwrap();
+        p.on_message(&PX4, &heartbeat, 0.0);
+        p
+    };
     let mut pilot = Pilot::new(hover_config()).unwrap();
+    pilot.on_message(&PX4, &value(0.4), 0.0);
+    assert_eq!(pilot.thrust_map(), None, "before PX4's HEARTBEAT");
+    // From another component: ignored.
+    let mut pilot = new_pilot();
     let other = MavHeader {
         component_id: 2,
         ..PX4
@@ -1019,7 +1064,7 @@ fn an_unusable_or_foreign_hover_thrust_parameter_is_not_used() {
     assert!(!pilot.finished());
     // From PX4 but out of range: the loop cannot fly.
     for bad in [0.0, 1.5] {
-        let mut pilot = Pilot::new(hover_config()).unwrap();
+        let mut pilot = new_pilot();
         pilot.on_message(&PX4, &value(bad), 0.0);
         assert_eq!(pilot.thrust_map(), None);
         assert!(pilot.finished());
@@ -1030,7 +1075,7 @@ fn an_unusable_or_foreign_hover_thrust_parameter_is_not_used() {
         );
     }
     // In range: used.
-    let mut pilot = Pilot::new(hover_config()).unwrap();
+    let mut pilot = new_pilot();
     pilot.on_message(&PX4, &value(0.4), 0.0);
     assert_eq!(pilot.thrust_map().map(|m| m.hover_thrust as f32), Some(0.4));
     assert!(!pilot.finished());
@@ -1258,4 +1303,127 @@ fn a_late_hover_thrust_answer_does_not_start_a_failed_pilot() {
         "armed at {:?} after failure()",
         ls.vehicle.record().armed_at
     );
+}
+
+// ---------------------------------------------------------------------------------------
+// PX4 as the real one showed it: its clock off the wall clock's rate, jumping; the stock SIH
+// vehicle, whose flip is planned from its parameters
+
+/// A flight in lockstep with the vehicle's clock at `rate` of the pilot's wall clock.
+fn fly_at(cfg: PilotConfig, vehicle: VehicleConfig, rate: f64, limit: f64) -> Lockstep {
+    let mut ls = Lockstep::with_vehicle(cfg, vehicle);
+    ls.clock_rate = rate;
+    let finished = ls.run_until(limit, |_| false);
+    if !finished {
+        ls.show("unfinished");
+    }
+    assert!(finished, "finished by {limit} s");
+    ls
+}
+
+fn assert_flown(name: &str, ls: &Lockstep) {
+    ls.show(name);
+    let report = ls.pilot.report();
+    let summary = report.summary.as_ref().expect("flown");
+    assert!(summary.success, "{name}: {:?}", summary.failures);
+    assert!(
+        report.failsafes.is_empty(),
+        "{name}: {:?}",
+        report.failsafes
+    );
+    assert_eq!(ls.pilot.session().map(|s| s.phase()), Some(Phase::Done));
+    let r = ls.vehicle.record();
+    assert_eq!(r.crashed, None, "{name}");
+    ls.assert_landed_and_disarmed(0.0);
+}
+
+#[test]
+fn a_hover_flies_with_px4s_clock_five_percent_off_the_wall_clock() {
+    for rate in [0.95, 0.988, 1.05] {
+        let ls = fly_at(hover_config(), VehicleConfig::default(), rate, 60.0);
+        assert_flown(&format!("hover at clock rate {rate}"), &ls);
+        let est = ls.pilot.report().clock_rate;
+        assert!((est - rate).abs() < 2e-3, "rate {rate}: estimated {est}");
+        // The prediction is bounded by the round trip TIMESYNC measured (here no delay: the
+        // least bound).
+        assert!(ls.pilot.report().round_trip_ms.is_some());
+    }
+}
+
+#[test]
+fn a_jump_of_px4s_clock_in_the_hover_is_followed() {
+    for by in [5.0, -5.0] {
+        let vehicle = VehicleConfig {
+            clock_jump: Some(ClockJump { at: 8.0, by }),
+            ..VehicleConfig::default()
+        };
+        let ls = fly_at(hover_config(), vehicle, 1.0, 60.0);
+        assert_flown(&format!("hover, clock jump {by:+}"), &ls);
+        assert_eq!(ls.pilot.report().clock_jumps, 1);
+        assert!(
+            ls.pilot
+                .events()
+                .iter()
+                .any(|e| e.what.contains("clock jumped by")),
+            "{:?}",
+            ls.pilot.events()
+        );
+    }
+}
+
+fn stock_flip_config(flip_rate: Option<f64>) -> PilotConfig {
+    PilotConfig {
+        flip_rate,
+        ..PilotConfig::new(MissionConfig::flip())
+    }
+}
+
+#[test]
+fn the_flip_is_planned_from_px4s_sih_parameters_and_flown_off_the_walls_rate() {
+    // The simulated PX4's design vehicle, its SIH parameters read, its clock 1.2 % slow as
+    // the real PX4's in lockstep, and 5 % fast.
+    for rate in [0.988, 1.05] {
+        let cfg = PilotConfig::new(MissionConfig::flip());
+        let ls = fly_at(cfg, VehicleConfig::default(), rate, 90.0);
+        assert_flown(&format!("flip at clock rate {rate}"), &ls);
+        let report = ls.pilot.report();
+        let v = report.vehicle.expect("read from PX4");
+        assert!(v.source.contains("SIH"), "{}", v.source);
+        assert!((v.thrust_to_weight() - 4.0).abs() < 0.05);
+        let flip = report.flip.expect("planned");
+        assert!(
+            (flip.rate - 5.0 * PI).abs() < 1e-9,
+            "the paper's flip: {flip:?}"
+        );
+        let turn = ls.vehicle.record().offboard_pitch_rotation.abs();
+        assert!(
+            (2.0 * PI - 0.3..2.0 * PI + 0.5).contains(&turn),
+            "turned {turn} rad"
+        );
+    }
+}
+
+#[test]
+fn the_stock_vehicle_hovers_with_its_profile_read_from_px4() {
+    let cfg = PilotConfig {
+        vehicle: None,
+        ..hover_config()
+    };
+    let ls = fly_at(cfg, VehicleConfig::stock(), 0.988, 60.0);
+    assert_flown("stock hover", &ls);
+    let v = ls.pilot.report().vehicle.expect("read from PX4");
+    assert!((v.pitch_authority() - 80.0).abs() < 1e-3, "{v:?}");
+}
+
+#[test]
+fn a_flip_beyond_the_vehicle_is_refused_before_arming() {
+    let mut ls = Lockstep::with_vehicle(stock_flip_config(Some(5.0 * PI)), VehicleConfig::stock());
+    assert!(ls.run_until(10.0, |_| false), "finished");
+    let failure = ls.pilot.failure().expect("refused");
+    assert!(
+        failure.contains("beyond this vehicle") && failure.contains("--flip-rate"),
+        "{failure}"
+    );
+    assert!(ls.vehicle.record().armed_at.is_empty());
+    assert_eq!(ls.setpoints().count(), 0);
 }

@@ -99,11 +99,170 @@ fn arming_checks_and_auto_disarm_after_landing() {
         results(&px4.on_message(&disarm, 1.0)),
         [MavResult::MAV_RESULT_DENIED]
     );
-    // AUTO.LAND: PX4 flies, then disarms on its own at touchdown.
+    // AUTO.LAND: PX4 flies, then disarms on its own once its land detector has said
+    // landed for COM_DISARM_LAND (2 s).
     px4.on_message(&mode(Px4Mode::Land), 1.1);
     assert_eq!(px4.tick(1.2, AIR).0, Control::Px4(Px4Mode::Land));
-    assert_eq!(px4.tick(5.0, GROUND).0, Control::Disarmed);
+    assert_eq!(px4.tick(5.0, GROUND).0, Control::Px4(Px4Mode::Land));
+    assert_eq!(px4.tick(6.99, GROUND).0, Control::Px4(Px4Mode::Land));
+    assert!(px4.armed() && px4.auto_disarmed_at().is_empty());
+    assert_eq!(px4.tick(7.0, GROUND).0, Control::Disarmed);
     assert!(!px4.armed());
+    assert_eq!(px4.auto_disarmed_at(), [7.0]);
+}
+
+/// COM_DISARM_LAND in OFFBOARD too (PX4 v1.16 did), only after a take-off, and a moment in
+/// the air restarts the 2 s.
+#[test]
+fn px4_disarms_two_seconds_after_landed_in_any_mode_once_it_has_flown() {
+    let mut px4 = Commander::new(CommanderConfig::default());
+    let sp = messages::set_attitude_target([0.0; 3], 0.1, 0);
+    px4.tick(0.0, GROUND);
+    px4.on_message(&sp, 0.0);
+    px4.on_message(&mode(Px4Mode::Offboard), 0.0);
+    px4.on_message(&messages::command_long(messages::Command::Arm, 0), 0.0);
+    // Armed on the ground, never flown: no automatic disarm (COM_DISARM_PRFLT is not
+    // simulated).
+    let mut t = 0.0;
+    while t < 5.0 {
+        px4.on_message(&sp, t);
+        assert!(matches!(px4.tick(t, GROUND).0, Control::Offboard(_)), "{t}");
+        t += 0.01;
+    }
+    // Flies, lands, lifts off again briefly at 7.5 s, lands for good.
+    let air = |t: f64| (5.0..6.0).contains(&t) || (7.5..7.6).contains(&t);
+    let mut disarmed_at = None;
+    while t < 12.0 && disarmed_at.is_none() {
+        px4.on_message(&sp, t);
+        px4.tick(t, if air(t) { AIR } else { GROUND });
+        if !px4.armed() {
+            disarmed_at = Some(t);
+        }
+        t += 0.01;
+    }
+    let at = disarmed_at.expect("PX4 disarmed");
+    assert!((at - 9.6).abs() < 0.015, "{at}");
+    assert_eq!(px4.mode(), Px4Mode::Offboard);
+    assert_eq!(px4.auto_disarmed_at(), [at]);
+    // Never with COM_DISARM_LAND <= 0.
+    let mut px4 = Commander::new(CommanderConfig {
+        disarm_land_delay: 0.0,
+        ..CommanderConfig::default()
+    });
+    px4.tick(0.0, GROUND);
+    px4.on_message(&messages::command_long(messages::Command::Arm, 0), 0.0);
+    px4.tick(1.0, AIR);
+    px4.tick(2.0, GROUND);
+    px4.tick(60.0, GROUND);
+    assert!(px4.armed());
+}
+
+/// PX4's `Hysteresis` as the land detector uses it: true after the delay, false at once.
+#[test]
+fn hysteresis_switches_on_after_its_delay_and_off_at_once() {
+    use firmware_shim::sitl::Hysteresis;
+    let mut h = Hysteresis::new(false, 1.0);
+    assert!(!h.update(true, 0.0));
+    assert!(!h.update(true, 0.99));
+    assert!(h.update(true, 1.0));
+    assert!(!h.update(false, 1.5));
+    // An interrupted request starts over.
+    assert!(!h.update(true, 2.0));
+    assert!(!h.update(false, 2.5));
+    assert!(!h.update(true, 2.6));
+    assert!(!h.update(true, 3.5));
+    assert!(h.update(true, 3.6));
+}
+
+fn detector_input(thrust: f64, vz: f64) -> firmware_shim::sitl::LandDetectorInput {
+    firmware_shim::sitl::LandDetectorInput {
+        armed: true,
+        thrust,
+        hover_thrust: 0.5,
+        climb_rate_control: false,
+        descending: false,
+        vz,
+        v_xy: 0.0,
+        rate_xy: 0.0,
+    }
+}
+
+/// Runs a fresh armed detector on `input` for `seconds` at 1 kHz after one airborne update;
+/// returns when it first said landed.
+fn landed_after(input: firmware_shim::sitl::LandDetectorInput, seconds: f64) -> Option<f64> {
+    use firmware_shim::sitl::{LandDetector, LandDetectorConfig};
+    let mut d = LandDetector::new(LandDetectorConfig::default());
+    // Airborne: full thrust, climbing.
+    assert!(!d.update(0.0, &detector_input(0.6, 1.0)));
+    (1..=(seconds * 1000.0) as usize)
+        .map(|i| i as f64 * 1e-3)
+        .find(|&t| d.update(t, &input))
+}
+
+/// PX4's multicopter land detector: ground contact (low thrust, no vertical movement), maybe
+/// landed (minimal thrust, no rotation), landed, each a third of LNDMC_TRIG_TIME (1 s).
+#[test]
+fn the_land_detector_says_landed_one_second_after_ground_contact() {
+    use firmware_shim::sitl::{LandDetector, LandDetectorConfig};
+    // OFFBOARD (no climb-rate control): thrust at most MPC_MANTHR_MIN + 0.01 = 0.09.
+    let t = landed_after(detector_input(0.05, 0.0), 3.0).expect("landed");
+    assert!((t - 1.0).abs() < 0.005, "{t}");
+    assert_eq!(
+        landed_after(detector_input(0.1, 0.0), 3.0),
+        None,
+        "thrust 0.1"
+    );
+    assert_eq!(
+        landed_after(detector_input(0.05, 0.3), 3.0),
+        None,
+        "sinking"
+    );
+    let rotating = firmware_shim::sitl::LandDetectorInput {
+        rate_xy: 0.5,
+        ..detector_input(0.05, 0.0)
+    };
+    assert_eq!(landed_after(rotating, 3.0), None, "rotating");
+    let sliding = firmware_shim::sitl::LandDetectorInput {
+        v_xy: 2.0,
+        ..detector_input(0.05, 0.0)
+    };
+    assert_eq!(landed_after(sliding, 3.0), None, "sliding");
+    // PX4's position control: ground contact needs a commanded descent, and the thrust
+    // threshold is MPC_THR_MIN + 0.1 (MPC_THR_HOVER - MPC_THR_MIN) = 0.158.
+    let hold = firmware_shim::sitl::LandDetectorInput {
+        climb_rate_control: true,
+        ..detector_input(0.15, 0.0)
+    };
+    assert_eq!(landed_after(hold, 3.0), None, "holding");
+    let land = firmware_shim::sitl::LandDetectorInput {
+        descending: true,
+        ..hold
+    };
+    let t = landed_after(land, 3.0).expect("landed in AUTO.LAND");
+    assert!((t - 1.0).abs() < 0.005, "{t}");
+    // Ground contact alone needs only low thrust: MPC_THR_MIN + 0.3 (MPC_THR_HOVER -
+    // MPC_THR_MIN) = 0.234.
+    for (thrust, contact) in [(0.2, true), (0.25, false)] {
+        let mut d = LandDetector::new(LandDetectorConfig::default());
+        d.update(0.0, &detector_input(0.6, 1.0));
+        for i in 1..=500 {
+            d.update(f64::from(i) * 1e-3, &detector_input(thrust, 0.0));
+        }
+        assert_eq!(d.ground_contact(), contact, "thrust {thrust}");
+        assert!(!d.maybe_landed() && !d.landed());
+    }
+    // Landed drops at once with thrust; disarmed, it is landed a third of
+    // LNDMC_TRIG_TIME later whatever it reads.
+    let mut d = LandDetector::new(LandDetectorConfig::default());
+    assert!(d.update(0.0, &detector_input(0.05, 0.0)), "starts landed");
+    assert!(!d.update(0.001, &detector_input(0.3, 0.0)));
+    let disarmed = firmware_shim::sitl::LandDetectorInput {
+        armed: false,
+        ..detector_input(0.9, 3.0)
+    };
+    assert!(!d.update(0.002, &disarmed));
+    assert!(!d.update(0.33, &disarmed));
+    assert!(d.update(0.336, &disarmed));
 }
 
 #[test]

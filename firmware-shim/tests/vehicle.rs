@@ -110,12 +110,30 @@ fn offboard_flies_and_the_offboard_loss_failsafe_holds_position_then_land_disarm
     assert!(drift < 0.1, "holds position: drift {drift} m");
     assert!(v.state().v.norm() < 0.2);
     assert!(!v.crashed() && p_hold.z > 1.0);
-    // AUTO.LAND: down at 0.5 m/s, then disarmed on the ground.
+    // AUTO.LAND: down at 0.5 m/s; on the ground PX4 idles, its land detector says landed
+    // LNDMC_TRIG_TIME (1 s) later and PX4 disarms COM_DISARM_LAND (2 s) after that.
     v.handle(&messages::command_long(Command::SetMode(Px4Mode::Land), 0));
-    v.step(p_hold.z / 0.5 + 3.0);
+    v.step(p_hold.z / 0.5 + 1.0);
     assert!(!v.crashed(), "a soft landing");
     assert!(v.state().p.z.abs() < 1e-9);
-    assert!(!v.commander().armed(), "PX4 disarms after an AUTO landing");
+    let td = v.record().touchdowns.last().expect("touched down").time;
+    check_auto_disarm(&mut v, td);
+}
+
+/// Steps `v` until PX4 disarms on its own (at most 5 s after `touchdown`) and checks it did
+/// so LNDMC_TRIG_TIME + COM_DISARM_LAND (3 s) after the touchdown, once.
+fn check_auto_disarm(v: &mut SimVehicle, touchdown: f64) {
+    while v.commander().armed() && v.time() < touchdown + 5.0 {
+        v.step(0.001);
+    }
+    let r = v.record();
+    assert_eq!(r.auto_disarmed_at.len(), 1, "PX4 disarmed on its own once");
+    assert_eq!(r.disarmed_at, r.auto_disarmed_at);
+    let after = r.auto_disarmed_at[0] - touchdown;
+    assert!(
+        (3.0..3.05).contains(&after),
+        "{after} s after the touchdown"
+    );
 }
 
 const PX4_RATE_LIMIT: f64 = 220.0 * PI / 180.0;
@@ -270,10 +288,11 @@ fn check_flip_then_rtl(v: &SimVehicle, rec: &Recovery, switch_at: f64) {
         "{td:?}"
     );
     assert_eq!(td.position, r.final_position);
-    // Armed once, disarmed once, by PX4 right after the touchdown.
+    // Armed once, disarmed once, by PX4's land detector 3 s after the touchdown.
     assert_eq!(r.armed_at.len(), 1);
-    assert_eq!(r.disarmed_at.len(), 1);
-    assert!(r.disarmed_at[0] >= td.time && r.disarmed_at[0] - td.time < 0.01);
+    assert_eq!(r.disarmed_at, r.auto_disarmed_at);
+    let after = r.disarmed_at[0] - td.time;
+    assert!((3.0..3.05).contains(&after), "{after}");
     // Modes: OFFBOARD (commanded), then AUTO.RTL exactly when commanded; no failsafe.
     let to_rtl: Vec<_> = r
         .mode_changes
@@ -498,4 +517,449 @@ fn initial_rates_come_from_the_config() {
     assert!((19..=21).contains(&count(&v.step(1.0))[0]));
     v.handle(&interval(331, 0.0));
     assert!((99..=101).contains(&count(&v.step(1.0))[0]));
+}
+
+/// A vehicle without estimation noise, and without height error unless `cfg` has one.
+fn exact(cfg: VehicleConfig) -> SimVehicle {
+    SimVehicle::new(VehicleConfig {
+        estimator: EstimatorConfig::perfect(),
+        height_bias: cfg.height_bias.or(Some(0.0)),
+        ..cfg
+    })
+}
+
+/// Streams thrust 0 for 1 s, then OFFBOARD and arm.
+fn arm_in_offboard(v: &mut SimVehicle) {
+    stream(v, 0.0, 1.0);
+    v.handle(&messages::command_long(
+        Command::SetMode(Px4Mode::Offboard),
+        0,
+    ));
+    v.handle(&messages::command_long(Command::Arm, 0));
+    assert!(v.commander().armed() && v.commander().mode() == Px4Mode::Offboard);
+}
+
+/// The timestamps of what `out` holds: ODOMETRY's `time_usec` and the others' `time_boot_ms`
+/// [s].
+fn stamps(out: &[MavMessage]) -> Vec<f64> {
+    out.iter()
+        .filter_map(|m| match m {
+            MavMessage::ODOMETRY(o) => Some(o.time_usec as f64 * 1e-6),
+            MavMessage::LOCAL_POSITION_NED(p) => Some(f64::from(p.time_boot_ms) * 1e-3),
+            MavMessage::ATTITUDE_QUATERNION(a) => Some(f64::from(a.time_boot_ms) * 1e-3),
+            _ => None,
+        })
+        .collect()
+}
+
+/// Every timestamp is the simulated time until the jump, and shifted by it afterwards,
+/// either way; TIMESYNC answers with the same clock.
+#[test]
+fn the_clock_jumps_as_configured_and_every_timestamp_follows() {
+    use firmware_shim::vehicle::ClockJump;
+    for by in [-0.5, 30.0] {
+        let mut v = exact(VehicleConfig {
+            clock_jump: Some(ClockJump { at: 1.0, by }),
+            ..VehicleConfig::default()
+        });
+        for _ in 0..2000 {
+            let out = v.step(0.001);
+            let t = v.time();
+            let want = if t >= 1.0 { t + by } else { t };
+            assert!((v.clock() - want).abs() < 1e-9, "{t}: {}", v.clock());
+            for s in stamps(&out) {
+                assert!((s - want).abs() < 1e-3, "at {t} (jump {by}): stamped {s}");
+            }
+        }
+        let reply = v.handle(&messages::timesync_request(7));
+        let [MavMessage::TIMESYNC(ts)] = reply.as_slice() else {
+            panic!("{reply:?}")
+        };
+        assert!(
+            (ts.tc1 as f64 * 1e-9 - (v.time() + by)).abs() < 1e-6,
+            "{ts:?}"
+        );
+    }
+}
+
+/// TIMESYNC as PX4's mavlink_timesync.cpp: a request (tc1 = 0) gets the vehicle's time in
+/// tc1 [ns] and its own ts1 back; an answer (tc1 != 0) gets nothing.
+#[test]
+fn timesync_requests_are_answered_with_the_vehicle_clock() {
+    let mut v = SimVehicle::new(VehicleConfig::default());
+    v.step(2.345);
+    let ts1 = 1_234_567_890_123;
+    let reply = v.handle(&MavMessage::TIMESYNC(mc::TIMESYNC_DATA { tc1: 0, ts1 }));
+    let [MavMessage::TIMESYNC(ts)] = reply.as_slice() else {
+        panic!("{reply:?}")
+    };
+    assert_eq!(ts.ts1, ts1);
+    assert!((ts.tc1 - 2_345_000_000).abs() < 1_000, "{}", ts.tc1);
+    let answer = MavMessage::TIMESYNC(mc::TIMESYNC_DATA { tc1: 5, ts1 });
+    assert!(v.handle(&answer).is_empty());
+}
+
+/// Clock rate, jump, height bias and vehicle names are checked, with messages that say what
+/// to give.
+#[test]
+fn bad_clock_and_bias_settings_are_refused_with_what_to_give() {
+    use firmware_shim::vehicle::{Airframe, ClockJump, VehicleConfigError};
+    let cfg = VehicleConfig::default();
+    assert_eq!(
+        cfg.clock_rate, 0.988,
+        "PX4 SITL in lockstep: 1.0-1.5 % slow"
+    );
+    assert_eq!(cfg.validate(), Ok(()));
+    for r in [0.49, 2.01, f64::NAN] {
+        let e = VehicleConfig {
+            clock_rate: r,
+            ..VehicleConfig::default()
+        }
+        .validate()
+        .unwrap_err();
+        assert!(matches!(e, VehicleConfigError::ClockRate(_)));
+        assert!(e.to_string().contains("0.5 to 2.0"), "{e}");
+    }
+    for r in [0.5, 2.0] {
+        let cfg = VehicleConfig {
+            clock_rate: r,
+            ..VehicleConfig::default()
+        };
+        assert_eq!(cfg.validate(), Ok(()));
+    }
+    assert_eq!(
+        "30:-5".parse::<ClockJump>(),
+        Ok(ClockJump { at: 30.0, by: -5.0 })
+    );
+    for bad in ["30", "-1:5", "a:b", "1:inf", ""] {
+        let e = bad.parse::<ClockJump>().unwrap_err();
+        assert!(e.to_string().contains("AT:BY"), "{bad}: {e}");
+    }
+    let e = VehicleConfig {
+        height_bias: Some(9.0),
+        ..VehicleConfig::default()
+    }
+    .validate()
+    .unwrap_err();
+    assert_eq!(e, VehicleConfigError::HeightBias(9.0));
+    assert_eq!("stock".parse::<Airframe>(), Ok(Airframe::Stock));
+    assert_eq!("agile".parse::<Airframe>(), Ok(Airframe::Agile));
+    let e = "x500".parse::<Airframe>().unwrap_err();
+    assert!(e.to_string().contains("agile") && e.to_string().contains("stock"));
+}
+
+/// The default height error is drawn from the seed: 0.2 to 0.7 m, both signs, the same for
+/// the same seed.
+#[test]
+fn the_default_height_bias_is_drawn_from_the_seed() {
+    let bias = |seed| {
+        VehicleConfig {
+            seed,
+            ..VehicleConfig::default()
+        }
+        .final_height_bias()
+    };
+    let all: Vec<f64> = (0..200).map(bias).collect();
+    assert!(
+        all.iter().all(|b| (0.2..=0.7).contains(&b.abs())),
+        "{all:?}"
+    );
+    let up = all.iter().filter(|b| **b > 0.0).count();
+    assert!((60..=140).contains(&up), "{up} of 200 positive");
+    let (lo, hi) = all.iter().fold((1.0f64, 0.0f64), |(lo, hi), b| {
+        (lo.min(b.abs()), hi.max(b.abs()))
+    });
+    assert!(lo < 0.25 && hi > 0.65, "{lo} {hi}");
+    assert_eq!(bias(7), bias(7));
+    let fixed = VehicleConfig {
+        height_bias: Some(-0.3),
+        ..VehicleConfig::default()
+    };
+    assert_eq!(fixed.final_height_bias(), -0.3);
+}
+
+/// A climb to about `z` m in OFFBOARD, then the controller stops: PX4's failsafe holds.
+fn take_off_and_hold(v: &mut SimVehicle, z: f64) {
+    let hover = v.thrust_map().hover_thrust as f32;
+    arm_in_offboard(v);
+    while v.state().p.z < z {
+        stream(v, 1.2 * hover, 0.02);
+        assert!(v.time() < 10.0, "climbs");
+    }
+    v.step(1.0);
+    assert_eq!(v.commander().mode(), Px4Mode::Position);
+}
+
+/// EKF2's height error: none at arming, the configured bias 20 s later, in ODOMETRY and
+/// LOCAL_POSITION_NED alike; PX4's own AUTO.LAND flies on it; the record stays true.
+#[test]
+fn the_estimate_carries_the_height_bias_and_the_truth_does_not() {
+    let bias = 0.5;
+    let mut v = exact(VehicleConfig {
+        height_bias: Some(bias),
+        ..VehicleConfig::default()
+    });
+    stream(&mut v, 0.0, 1.0);
+    v.handle(&messages::command_long(
+        Command::SetMode(Px4Mode::Offboard),
+        0,
+    ));
+    v.handle(&messages::command_long(Command::Arm, 0));
+    let first = odometry(&v.step(0.1)).pop().unwrap();
+    assert!(first.position[2].abs() < 0.01, "{:?}", first.position);
+    take_off_and_hold(&mut v, 2.0);
+    v.step(21.0);
+    let out = v.step(0.1);
+    let truth_ned_z = -v.state().p.z;
+    let o = odometry(&out).pop().unwrap();
+    assert!(
+        (f64::from(o.position[2]) - (truth_ned_z - bias)).abs() < 0.01,
+        "ODOMETRY z {} vs true {truth_ned_z}",
+        o.position[2]
+    );
+    let lp = out
+        .iter()
+        .rev()
+        .find_map(|m| match m {
+            MavMessage::LOCAL_POSITION_NED(p) => Some(p.z),
+            _ => None,
+        })
+        .unwrap();
+    assert!((f64::from(lp) - (truth_ned_z - bias)).abs() < 0.01, "{lp}");
+    v.handle(&messages::command_long(Command::SetMode(Px4Mode::Land), 0));
+    v.step(8.0);
+    let r = v.record();
+    let td = r.touchdowns.last().expect("landed");
+    assert!((td.estimated_height - bias).abs() < 0.02, "{td:?}");
+    assert_eq!(td.position.z, 0.0);
+    assert!((r.height_bias - bias).abs() < 1e-9);
+    assert!(r.min_height.unwrap() >= 0.0 && r.crashed.is_none());
+}
+
+fn landed_states(out: &[MavMessage]) -> Vec<mc::MavLandedState> {
+    out.iter()
+        .filter_map(|m| match m {
+            MavMessage::EXTENDED_SYS_STATE(s) => Some(s.landed_state),
+            _ => None,
+        })
+        .collect()
+}
+
+/// Flies `v` (OFFBOARD, armed, airborne) down at about 0.5 m/s until it touches down.
+fn descend_in_offboard(v: &mut SimVehicle) -> f64 {
+    let hover = v.thrust_map().hover_thrust;
+    while v.record().touchdowns.is_empty() {
+        let vz = v.state().v.z;
+        let thrust = (hover * (1.0 + 0.5 * (-0.5 - vz))).clamp(0.0, 1.0) as f32;
+        v.handle(&messages::set_attitude_target([0.0; 3], thrust, 0));
+        v.step(0.01);
+        assert!(v.time() < 60.0 && !v.crashed(), "descends");
+    }
+    v.record().touchdowns[0].time
+}
+
+/// PX4's land detector in OFFBOARD: on the ground with the thrust above MPC_MANTHR_MIN +
+/// 0.01, never landed; at low thrust, landed 1 s later (EXTENDED_SYS_STATE, 5 Hz, says so
+/// only then) and disarmed 2 s after that, still in OFFBOARD.
+#[test]
+fn the_land_detector_disarms_in_offboard_two_seconds_after_landed() {
+    use mc::MavLandedState::{MAV_LANDED_STATE_IN_AIR, MAV_LANDED_STATE_ON_GROUND};
+    let mut v = exact(VehicleConfig::default());
+    let hover = v.thrust_map().hover_thrust as f32;
+    arm_in_offboard(&mut v);
+    for _ in 0..50 {
+        stream(&mut v, 1.2 * hover, 0.02);
+    }
+    let out = v.step(0.01);
+    assert!(v.state().p.z > 0.5);
+    let touchdown = descend_in_offboard(&mut v);
+    // Thrust 0.2 (0.8 x hover): more than PX4's MPC_MANTHR_MIN + 0.01, never landed.
+    let mut seen = landed_states(&out);
+    for _ in 0..250 {
+        v.handle(&messages::set_attitude_target([0.0; 3], 0.2, 0));
+        seen.extend(landed_states(&v.step(0.02)));
+    }
+    assert!(
+        seen.iter().all(|s| *s == MAV_LANDED_STATE_IN_AIR),
+        "{seen:?}"
+    );
+    assert!(v.commander().armed() && v.record().touchdowns.len() == 1);
+    let low_from = v.time();
+    // Thrust 0.05: landed after LNDMC_TRIG_TIME, disarmed after COM_DISARM_LAND.
+    let mut first_on_ground = None;
+    let mut n_sys_state = 0;
+    while v.commander().armed() && v.time() < low_from + 5.0 {
+        v.handle(&messages::set_attitude_target([0.0; 3], 0.05, 0));
+        let states = landed_states(&v.step(0.01));
+        n_sys_state += states.len();
+        if states.contains(&MAV_LANDED_STATE_ON_GROUND) {
+            first_on_ground.get_or_insert(v.time());
+        }
+    }
+    let landed_after = first_on_ground.expect("ON_GROUND") - low_from;
+    assert!((1.0..1.25).contains(&landed_after), "{landed_after}");
+    let r = v.record();
+    let disarm = *r.auto_disarmed_at.first().expect("PX4 disarmed");
+    assert!(
+        (3.0..3.05).contains(&(disarm - low_from)),
+        "{}",
+        disarm - low_from
+    );
+    let n_expected = (disarm - low_from) * 5.0;
+    assert!(
+        (n_sys_state as f64 - n_expected).abs() <= 1.5,
+        "{n_sys_state}"
+    );
+    assert_eq!(v.commander().mode(), Px4Mode::Offboard);
+    assert!(touchdown < low_from && r.crashed.is_none());
+    let Inbound::Heartbeat { armed, mode } = classify(&PX4, &v.commander().heartbeat()) else {
+        panic!()
+    };
+    assert!(!armed && mode == Px4Mode::Offboard);
+}
+
+/// Reads parameter `name` from `v` the way the shim does (by name, index -1).
+fn read_param(v: &mut SimVehicle, name: &str) -> Option<mc::PARAM_VALUE_DATA> {
+    let reply = v.handle(&messages::param_request_read(name));
+    assert!(reply.len() <= 1, "{reply:?}");
+    reply.into_iter().find_map(|m| match m {
+        MavMessage::PARAM_VALUE(p) => Some(p),
+        _ => None,
+    })
+}
+
+fn param(v: &mut SimVehicle, name: &str) -> f64 {
+    let p = read_param(v, name).unwrap_or_else(|| panic!("{name}: no answer"));
+    assert!(messages::param_name_is(&p.param_id.into(), name));
+    assert_eq!(p.param_type, mc::MavParamType::MAV_PARAM_TYPE_REAL32);
+    f64::from(p.param_value)
+}
+
+/// The parameters as PX4 SITL with the SIH quadrotor answers them; MPC_THR_HOVER follows the
+/// vehicle; indices and the count are consistent; unknown names get no answer.
+#[test]
+fn parameters_are_answered_as_px4_sitl_for_the_selected_vehicle() {
+    let mut stock = SimVehicle::new(VehicleConfig::stock());
+    let close = |a: f64, b: f64| (a - b).abs() < 1e-5;
+    for (name, want) in [
+        ("MPC_THR_HOVER", 0.5),
+        ("MPC_THR_MIN", 0.12),
+        ("MC_ROLLRATE_P", 0.15),
+        ("MC_PITCHRATE_P", 0.15),
+        ("MC_ROLLRATE_MAX", 220.0),
+        ("MC_PITCHRATE_MAX", 220.0),
+        ("SIH_MASS", 1.0),
+        ("SIH_IXX", 0.025),
+        ("SIH_IYY", 0.025),
+        ("SIH_IZZ", 0.030),
+        ("SIH_T_MAX", 5.0),
+        ("SIH_Q_MAX", 0.1),
+        ("SIH_L_ROLL", 0.2),
+        ("SIH_L_PITCH", 0.2),
+        ("SIH_T_TAU", 0.05),
+        ("SIH_KDV", 1.0),
+        ("SIH_KDW", 0.025),
+        ("COM_DISARM_LAND", 2.0),
+    ] {
+        let got = param(&mut stock, name);
+        assert!(close(got, want), "{name}: {got} (PX4: {want})");
+    }
+    // The true hover thrust of the stock vehicle is 0.4905 (PX4 SITL measured 0.495).
+    assert!((stock.thrust_map().hover_thrust - 0.4905).abs() < 1e-4);
+    // The agile vehicle answers its own (calibrated) hover thrust and geometry.
+    let mut agile = SimVehicle::new(VehicleConfig::default());
+    assert!((param(&mut agile, "MPC_THR_HOVER") - 9.81 / (4.0 * 9.8)).abs() < 1e-6);
+    assert!(close(param(&mut agile, "SIH_T_MAX"), 9.8));
+    assert!(close(param(&mut agile, "SIH_L_PITCH"), 0.17 / 2f64.sqrt()));
+    // Index and count: by index gives the same parameter; one past the end, nothing.
+    let p = read_param(&mut stock, "SIH_IYY").unwrap();
+    let n = usize::from(p.param_count);
+    assert_eq!(n, stock.parameters().len());
+    let by_index = |v: &mut SimVehicle, i: i16| {
+        v.handle(&MavMessage::PARAM_REQUEST_READ(
+            mc::PARAM_REQUEST_READ_DATA {
+                param_index: i,
+                target_system: 1,
+                target_component: 1,
+                param_id: "".into(),
+            },
+        ))
+    };
+    let reply = by_index(&mut stock, p.param_index as i16);
+    let [MavMessage::PARAM_VALUE(q)] = reply.as_slice() else {
+        panic!("{reply:?}")
+    };
+    assert_eq!((q.param_id, q.param_value), (p.param_id, p.param_value));
+    assert!(by_index(&mut stock, n as i16).is_empty());
+    // PX4 does not answer for a parameter it does not have.
+    assert!(read_param(&mut stock, "NO_SUCH_PARAM").is_none());
+    assert!(read_param(&mut stock, "SIH_MAS").is_none());
+}
+
+/// The true pitch rate of `v`'s step response to `rate` (FRD) at hover thrust, 1 ms apart
+/// for 0.4 s, from a steady hover at 1.5 m.
+fn pitch_step(v: &mut SimVehicle, rate: f32) -> Vec<f64> {
+    let hover = v.thrust_map().hover_thrust as f32;
+    arm_in_offboard(v);
+    while v.state().p.z < 1.5 {
+        fly(v, [0.0; 3], 1.3 * hover);
+        assert!(v.time() < 10.0, "climbs");
+    }
+    for _ in 0..50 {
+        fly(v, [0.0; 3], hover);
+    }
+    (0..400)
+        .map(|_| {
+            v.handle(&messages::set_attitude_target([0.0, rate, 0.0], hover, 0));
+            v.step(0.001);
+            v.state().w.y.abs()
+        })
+        .collect()
+}
+
+/// PX4's stock SIH quadrotor: its pitch torque authority is 2 SIH_T_MAX SIH_L_PITCH (SIH's
+/// mixer: `L_PITCH * T_MAX * (u0 - u1 + u2 - u3)`), 80 rad/s^2 over SIH_IYY; PX4's default
+/// rate gains saturate it on a step to the flip's 5*pi rad/s, which it reaches in about
+/// 0.25 s (the agile vehicle: 0.10 s).
+#[test]
+fn the_stock_vehicle_has_px4s_pitch_authority() {
+    let mut v = exact(VehicleConfig::stock());
+    let (t_max, l_pitch, iyy, kdw) = (
+        param(&mut v, "SIH_T_MAX"),
+        param(&mut v, "SIH_L_PITCH"),
+        param(&mut v, "SIH_IYY"),
+        param(&mut v, "SIH_KDW"),
+    );
+    let authority = 2.0 * t_max * l_pitch;
+    assert!((authority / iyy - 80.0).abs() < 1e-3);
+    // The torque the rotors deliver, from the true motion: Iyy w' + KDW w. A step large
+    // enough to keep the rotors saturated shows the whole authority.
+    let torque = |w: &[f64]| {
+        w.windows(2)
+            .map(|p| iyy * (p[1] - p[0]) / 0.001 + kdw * p[1])
+            .fold(0.0f64, f64::max)
+    };
+    let w_big = pitch_step(&mut exact(VehicleConfig::stock()), 30.0);
+    let peak = torque(&w_big);
+    assert!(
+        (peak / authority - 1.0).abs() < 0.01,
+        "{peak} N m vs {authority}"
+    );
+    // The flip's step: the angular acceleration approaches the authority (rotor lag and
+    // damping keep it a little below), and 90 % of the rate comes after about 0.25 s.
+    let flip = 5.0 * std::f32::consts::PI;
+    let w = pitch_step(&mut v, flip);
+    let acc = w
+        .windows(2)
+        .map(|p| (p[1] - p[0]) / 0.001)
+        .fold(0.0f64, f64::max);
+    assert!(
+        (0.8 * authority / iyy..=authority / iyy).contains(&acc),
+        "{acc} rad/s^2"
+    );
+    let t90 = |w: &[f64]| w.iter().position(|x| *x >= 0.9 * f64::from(flip)).unwrap();
+    let t_stock = t90(&w) as f64 * 1e-3;
+    assert!((0.2..0.3).contains(&t_stock), "{t_stock} s");
+    let t_agile = t90(&pitch_step(&mut exact(VehicleConfig::default()), flip)) as f64 * 1e-3;
+    assert!(t_agile < 0.12, "{t_agile} s");
 }

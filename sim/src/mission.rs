@@ -133,6 +133,10 @@ pub struct MissionConfig {
     pub flip_rate: f64,
     /// Rotation of the flip \[rad\] (2*pi: one full turn).
     pub flip_angle: f64,
+    /// Angular acceleration of the flip's rate reference [rad/s^2]: the rate ramps up to
+    /// `flip_rate` and down to zero at the end of the turn at this rate (infinite: a step
+    /// of the rate, the paper's flip).
+    pub flip_accel: f64,
     /// Mass-normalized collective thrust during the flip [m/s^2].
     pub flip_thrust: f64,
     /// Duration of the recovery leg from the flip's end back to the rally point.
@@ -177,6 +181,7 @@ impl MissionConfig {
             ascend_speed: 2.5,
             flip_rate: 5.0 * PI,
             flip_angle: 2.0 * PI,
+            flip_accel: f64::INFINITY,
             flip_thrust: 5.0,
             recover_time: 1.5,
             hold_time: 2.5,
@@ -202,10 +207,78 @@ impl MissionConfig {
 
     /// Duration of the flip rotation \[s\].
     pub fn flip_time(&self) -> f64 {
-        if self.flip_rate.abs() > 0.0 {
-            (self.flip_angle / self.flip_rate).abs()
+        self.flip_profile().duration()
+    }
+
+    /// The flip's rate profile.
+    pub fn flip_profile(&self) -> FlipProfile {
+        FlipProfile {
+            rate: self.flip_rate,
+            accel: self.flip_accel,
+            angle: self.flip_angle,
+        }
+    }
+}
+
+/// The flip's pitch-rate reference: up to `rate` at `accel`, on, then down to zero at `accel`
+/// where the rotation reaches `angle` (a triangle if `angle` is too short for `rate`); with
+/// an infinite `accel`, a step of `rate` for `angle / rate`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FlipProfile {
+    /// Top pitch rate [rad/s].
+    pub rate: f64,
+    /// Angular acceleration [rad/s^2].
+    pub accel: f64,
+    /// Rotation \[rad\].
+    pub angle: f64,
+}
+
+impl FlipProfile {
+    fn ramped(&self) -> bool {
+        self.accel.is_finite() && self.accel > 0.0 && self.rate.abs() > 1e-9
+    }
+
+    /// The top rate reached [rad/s] (signed as `rate`).
+    fn top(&self) -> f64 {
+        if !self.ramped() {
+            return self.rate;
+        }
+        let triangle = (self.angle.abs() * self.accel).sqrt();
+        self.rate.signum() * self.rate.abs().min(triangle)
+    }
+
+    /// Duration of the turn \[s\].
+    pub fn duration(&self) -> f64 {
+        let w = self.top().abs();
+        if w <= 1e-9 {
+            return 0.0;
+        }
+        if !self.ramped() {
+            return (self.angle / self.rate).abs();
+        }
+        self.angle.abs() / w + w / self.accel
+    }
+
+    /// Rotation and rate `tau` seconds in.
+    pub fn at(&self, tau: f64) -> (f64, f64) {
+        if !self.ramped() {
+            return (self.rate * tau, self.rate);
+        }
+        let w = self.top();
+        let s = w.signum();
+        let ta = w.abs() / self.accel;
+        let total = self.duration();
+        let tau = tau.clamp(0.0, total);
+        if tau < ta {
+            (0.5 * s * self.accel * tau * tau, s * self.accel * tau)
+        } else if tau <= total - ta {
+            (0.5 * w * ta + w * (tau - ta), w)
         } else {
-            0.0
+            let r = total - tau;
+            (
+                self.angle - 0.5 * s * self.accel * r * r,
+                s * self.accel * r,
+            )
         }
     }
 }
@@ -303,6 +376,8 @@ pub enum Segment {
         v0: Vector3<f64>,
         /// Pitch rate [rad/s].
         rate: f64,
+        /// The rate profile (a step of `rate` when not ramped).
+        profile: FlipProfile,
         /// Mass-normalized thrust [m/s^2].
         thrust: f64,
         /// Heading \[rad\].
@@ -399,9 +474,14 @@ fn eval_segment(
             p0,
             v0,
             rate,
+            profile,
             thrust,
             yaw,
         } => {
+            if profile.ramped() {
+                let (p, v, a, q, w) = ramped_flip_state(&p0, &v0, &profile, thrust, yaw, tau);
+                return (p, v, a, Some(q), Vector3::new(0.0, w, 0.0), Some(thrust));
+            }
             let (p, v, a, q) = flip_state(&p0, &v0, rate, thrust, yaw, tau);
             (p, v, a, Some(q), Vector3::new(0.0, rate, 0.0), Some(thrust))
         }
@@ -455,6 +535,40 @@ pub fn flip_state(
     let v = v0 + heading * v_loc - g * tau;
     let p = p0 + v0 * tau + heading * p_loc - g * (0.5 * tau * tau);
     (p, v, a, q)
+}
+
+/// [`flip_state`] for a ramped rate profile, integrated numerically (1 ms steps, the
+/// midpoint of each step's rotation): position, velocity, acceleration, attitude, rate.
+pub fn ramped_flip_state(
+    p0: &Vector3<f64>,
+    v0: &Vector3<f64>,
+    profile: &FlipProfile,
+    c: f64,
+    yaw: f64,
+    tau: f64,
+) -> (
+    Vector3<f64>,
+    Vector3<f64>,
+    Vector3<f64>,
+    UnitQuaternion<f64>,
+    f64,
+) {
+    let heading = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), yaw);
+    let g = Vector3::z() * G;
+    let thrust = |th: f64| heading * Vector3::new(th.sin(), 0.0, th.cos()) * c - g;
+    let tau = tau.max(0.0);
+    let steps = (tau / 1e-3).ceil().max(1.0);
+    let h = tau / steps;
+    let (mut p, mut v) = (*p0, *v0);
+    for i in 0..steps as usize {
+        let (th, _) = profile.at((i as f64 + 0.5) * h);
+        let a = thrust(th);
+        p += v * h + a * (0.5 * h * h);
+        v += a * h;
+    }
+    let (th, w) = profile.at(tau);
+    let q = heading * UnitQuaternion::from_axis_angle(&Vector3::y_axis(), th);
+    (p, v, thrust(th), q, w)
 }
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -828,18 +942,12 @@ impl Mission {
             p0: top,
             v0: Vector3::z() * vz,
             rate: c.flip_rate,
+            profile: c.flip_profile(),
             thrust: c.flip_thrust,
             yaw: c.yaw,
         };
         let tf = c.flip_time();
-        let (p1, v1, a1, _) = flip_state(
-            &top,
-            &(Vector3::z() * vz),
-            c.flip_rate,
-            c.flip_thrust,
-            c.yaw,
-            tf,
-        );
+        let (p1, v1, a1, ..) = eval_segment(&flip, tf);
         let t_rec = t_flip + tf;
         let recover = Segment::Quintic {
             start: [p1, v1, a1],

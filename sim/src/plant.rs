@@ -127,6 +127,42 @@ impl Default for QuadParams {
 }
 
 impl QuadParams {
+    /// PX4's stock SIH quadrotor (simulator_sih's default parameters, airframe
+    /// `sihsim_quadx`), in this plant's terms:
+    ///
+    /// * `mass` 1.0 kg (SIH_MASS);
+    /// * `inertia` (0.025, 0.025, 0.030) kg m^2 (SIH_IXX, SIH_IYY, SIH_IZZ);
+    /// * `arm` 0.2 * sqrt(2) m: SIH's SIH_L_ROLL and SIH_L_PITCH (0.2 m) are the levers
+    ///   themselves, half the distance between the left and right (front and rear) rotors;
+    /// * `rotor_tau` 0.05 s (SIH_T_TAU);
+    /// * `k_thrust` 5e-6 N/(rad/s)^2 and `omega_max` 1000 rad/s: 5 N per rotor (SIH_T_MAX),
+    ///   thrust-to-weight 2.04, hover at 0.4905 of full thrust;
+    /// * `k_torque` 0.02 m: 0.1 N m per rotor at full thrust (SIH_Q_MAX);
+    /// * `omega_min` 0 (no idle);
+    /// * `drag` (1, 1, 1) N/(m/s) (SIH_KDV, linear and isotropic in SIH);
+    /// * `g` 9.81 m/s^2.
+    ///
+    /// The pitch authority is `2 * SIH_T_MAX * SIH_L_PITCH / SIH_IYY` = 80 rad/s^2 (SIH's
+    /// pitch torque is `SIH_L_PITCH * SIH_T_MAX * (u0 - u1 + u2 - u3)` for rotor commands
+    /// `u` in [0, 1]). Differences from SIH: SIH's rotors are first order in thrust, this
+    /// plant's in rotor speed (thrust `k_thrust omega^2`; the same time constant near a
+    /// steady state); SIH's angular damper (SIH_KDW) is not part of the plant (apply it as a
+    /// disturbance torque).
+    pub fn px4_sih() -> Self {
+        Self {
+            mass: 1.0,
+            inertia: Vector3::new(0.025, 0.025, 0.030),
+            arm: 0.2 * std::f64::consts::SQRT_2,
+            rotor_tau: 0.05,
+            k_thrust: 5e-6,
+            k_torque: 0.02,
+            omega_max: 1000.0,
+            omega_min: 0.0,
+            drag: Vector3::new(1.0, 1.0, 1.0),
+            g: 9.81,
+        }
+    }
+
     /// Maximum thrust of one rotor, N: `k_thrust * omega_max^2`.
     pub fn rotor_thrust_max(&self) -> f64 {
         self.k_thrust * self.omega_max * self.omega_max

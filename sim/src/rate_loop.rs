@@ -71,6 +71,49 @@ impl Default for RateGains {
     }
 }
 
+/// PX4's default multicopter rate-controller parameters (mc_rate_control): the P, I and D
+/// gains (MC_ROLLRATE_P/I/D = MC_PITCHRATE_P/I/D, MC_YAWRATE_P/I/D) and the integrator limits
+/// (MC_RR_INT_LIM, MC_PR_INT_LIM, MC_YR_INT_LIM), on PX4's normalized torque, roll, pitch,
+/// yaw.
+pub const PX4_RATE_P: [f64; 3] = [0.15, 0.15, 0.2];
+/// See [`PX4_RATE_P`].
+pub const PX4_RATE_I: [f64; 3] = [0.2, 0.2, 0.1];
+/// See [`PX4_RATE_P`].
+pub const PX4_RATE_D: [f64; 3] = [0.003, 0.003, 0.0];
+/// See [`PX4_RATE_P`].
+pub const PX4_RATE_INT_LIM: [f64; 3] = [0.3, 0.3, 0.3];
+
+/// The torque (N m) a unit normalized torque command of PX4's rate controller gives on
+/// vehicle `params` (a quad X), per axis: PX4's control allocation normalizes the roll and
+/// pitch columns of its mixer to `1/sqrt(2)` of a rotor's thrust range per rotor, and the
+/// yaw column to its largest entry, 1; so roll and pitch give
+/// `4 * T_max / sqrt(2) * arm / sqrt(2) = 2 T_max arm` and yaw `4 k_torque T_max`.
+pub fn px4_torque_per_command(params: &QuadParams) -> Vector3<f64> {
+    let t_max = params.rotor_thrust_max();
+    let rp = 2.0 * t_max * params.arm;
+    Vector3::new(rp, rp, 4.0 * params.k_torque * t_max)
+}
+
+impl RateGains {
+    /// PX4's default rate gains ([`PX4_RATE_P`], ...) on vehicle `params`, in this loop's
+    /// units: PX4 commands a normalized torque `P e + I + D d(w)/dt`; times
+    /// [`px4_torque_per_command`] over the inertia, that is `kp`, `ki`, `kd` and `i_limit`
+    /// here. No feed-forward (MC_*RATE_FF 0). On PX4's SIH quadrotor
+    /// ([`QuadParams::px4_sih`]): `kp` (17.0, 17.0, 2.67) 1/s, saturating the rotors beyond
+    /// about 4.7 rad/s of roll or pitch-rate error.
+    pub fn px4_default(params: &QuadParams) -> Self {
+        let k = px4_torque_per_command(params).component_div(&params.inertia);
+        let scale = |g: [f64; 3]| Vector3::from(g).component_mul(&k);
+        Self {
+            kp: scale(PX4_RATE_P),
+            ki: scale(PX4_RATE_I),
+            kd: scale(PX4_RATE_D),
+            kff: Vector3::zeros(),
+            i_limit: scale(PX4_RATE_INT_LIM),
+        }
+    }
+}
+
 /// Output of one rate-loop update.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RateOutput {

@@ -37,6 +37,52 @@ pub const FAILSAFE_DELAY_LIMIT_S: f64 = 0.2;
 /// mode, which flies on dead reckoning).
 pub const LANDING_TOL_M: f64 = 0.25;
 
+/// The thresholds a trial is judged by.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Criteria {
+    /// Distance to the rally point that counts as recovered \[m\].
+    pub recovery_tol_m: f64,
+    /// Longest acceptable recovery after the flip \[s\].
+    pub recovery_limit_s: f64,
+    /// Lowest acceptable height from the ascent to the end of the hold \[m\].
+    pub min_flight_altitude_m: f64,
+    /// Fastest acceptable touchdown [m/s].
+    pub max_touchdown_speed: f64,
+    /// Fraction of the flip's rate reference that must be reached.
+    pub min_rate_fraction: f64,
+    /// Return mode must engage this soon after the pose is lost \[s\].
+    pub failsafe_delay_limit_s: f64,
+    /// Touchdown this close to the landing point counts as landed there \[m\].
+    pub landing_tol_m: f64,
+    /// The same after a failsafe's return \[m\].
+    pub failsafe_landing_tol_m: f64,
+}
+
+impl Criteria {
+    /// The simulator's criteria, judged on the true state: the constants of this module.
+    pub const SIMULATOR: Criteria = Criteria {
+        recovery_tol_m: RECOVERY_TOL_M,
+        recovery_limit_s: RECOVERY_LIMIT_S,
+        min_flight_altitude_m: MIN_FLIGHT_ALTITUDE_M,
+        max_touchdown_speed: MAX_TOUCHDOWN_SPEED,
+        min_rate_fraction: MIN_RATE_FRACTION,
+        failsafe_delay_limit_s: FAILSAFE_DELAY_LIMIT_S,
+        landing_tol_m: LANDING_TOL_M,
+        failsafe_landing_tol_m: 0.5,
+    };
+
+    /// A flight through PX4, judged on PX4's estimate (EKF2 on GNSS: decimetres of noise
+    /// and drift, so the position criteria are wider): recovered within 0.5 m, landed within
+    /// 1 m of home, touchdown at most 0.7 m/s; the rest as [`Criteria::SIMULATOR`].
+    pub const PX4: Criteria = Criteria {
+        recovery_tol_m: 0.5,
+        max_touchdown_speed: 0.7,
+        landing_tol_m: 1.0,
+        failsafe_landing_tol_m: 1.5,
+        ..Criteria::SIMULATOR
+    };
+}
+
 /// Mean, 99th percentile and maximum.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
 pub struct TimeStats {
@@ -209,21 +255,39 @@ fn summarize_phase(rows: &[Sample]) -> PhaseSummary {
 /// Recovery time: from `t0` (the flip's end) until the vehicle is within
 /// [`RECOVERY_TOL_M`] of `target` for good, judged on `rows` up to `until`.
 pub fn recovery_time(rows: &[Sample], target: &Vector3<f64>, t0: f64, until: f64) -> Option<f64> {
+    recovery_time_within(rows, target, t0, until, RECOVERY_TOL_M)
+}
+
+/// [`recovery_time`] with another distance `tol` \[m\].
+pub fn recovery_time_within(
+    rows: &[Sample],
+    target: &Vector3<f64>,
+    t0: f64,
+    until: f64,
+    tol: f64,
+) -> Option<f64> {
     let window: Vec<&Sample> = rows.iter().filter(|s| s.t >= t0 && s.t <= until).collect();
     let last = window.last()?;
-    if (pos(last) - target).norm() >= RECOVERY_TOL_M {
+    if (pos(last) - target).norm() >= tol {
         return None;
     }
     let last_out = window
         .iter()
         .rev()
-        .find(|s| (pos(s) - target).norm() >= RECOVERY_TOL_M)
+        .find(|s| (pos(s) - target).norm() >= tol)
         .map_or(t0, |s| s.t);
     Some(last_out - t0)
 }
 
 /// Summarizes one trial and judges it.
 pub fn summarize(res: &TrialResult) -> TrialSummary {
+    summarize_with(res, &Criteria::SIMULATOR)
+}
+
+/// [`summarize`] with other thresholds.
+// One pass over the log's phases, then the judgement, criterion by criterion: long, but
+// each step reads in order.
+pub fn summarize_with(res: &TrialResult, c: &Criteria) -> TrialSummary {
     let cfg = &res.config;
     let m = &cfg.mission;
     let rows = &res.samples;
@@ -263,7 +327,9 @@ pub fn summarize(res: &TrialResult) -> TrialSummary {
         .and_then(|h| h.last().map(|s| s.t))
         .or_else(|| recover.and_then(|r| r.last().map(|s| s.t)));
     let recovery = match (flip_end, until) {
-        (Some(t0), Some(t1)) => recovery_time(rows, &m.rally_point, t0, t1),
+        (Some(t0), Some(t1)) => {
+            recovery_time_within(rows, &m.rally_point, t0, t1, c.recovery_tol_m)
+        }
         _ => None,
     };
     let mut summaries: Vec<PhaseSummary> = phases.iter().map(|r| summarize_phase(r)).collect();
@@ -313,16 +379,17 @@ pub fn summarize(res: &TrialResult) -> TrialSummary {
         Outcome::Timeout => failures.push("did not land before the time limit".to_string()),
     }
     if let Some(v) = res.touchdown.map(|t| t.vertical_speed)
-        && v.abs() >= MAX_TOUCHDOWN_SPEED
+        && v.abs() >= c.max_touchdown_speed
     {
         failures.push(format!(
-            "touchdown at {v:.2} m/s (limit {MAX_TOUCHDOWN_SPEED})"
+            "touchdown at {v:.2} m/s (limit {})",
+            c.max_touchdown_speed
         ));
     }
     let landing_tol = if res.failsafe_at.is_some() {
-        0.5
+        c.failsafe_landing_tol_m
     } else {
-        LANDING_TOL_M
+        c.landing_tol_m
     };
     if let Some(e) = landing_error
         && e > landing_tol
@@ -333,7 +400,7 @@ pub fn summarize(res: &TrialResult) -> TrialSummary {
     }
     if res.pose_lost_at.is_some() {
         match failsafe_delay {
-            Some(d) if d <= FAILSAFE_DELAY_LIMIT_S => {}
+            Some(d) if d <= c.failsafe_delay_limit_s => {}
             Some(d) => failures.push(format!("return mode engaged {d:.3} s after the pose loss")),
             None => failures.push("pose lost but return mode never engaged".to_string()),
         }
@@ -344,24 +411,25 @@ pub fn summarize(res: &TrialResult) -> TrialSummary {
             None => failures.push("the flip never started".to_string()),
         }
         if let Some(p) = peak_rate
-            && p < MIN_RATE_FRACTION * m.flip_rate
+            && p < c.min_rate_fraction * m.flip_rate
         {
             failures.push(format!(
                 "peak pitch rate {p:.1} rad/s < {:.0} % of {:.1}",
-                MIN_RATE_FRACTION * 100.0,
+                c.min_rate_fraction * 100.0,
                 m.flip_rate
             ));
         }
         if let Some(z) = min_flight_alt
-            && z < MIN_FLIGHT_ALTITUDE_M
+            && z < c.min_flight_altitude_m
         {
             failures.push(format!("went down to {z:.2} m around the flip"));
         }
         match recovery {
-            Some(r) if r <= RECOVERY_LIMIT_S => {}
+            Some(r) if r <= c.recovery_limit_s => {}
             Some(r) => failures.push(format!("recovered only after {r:.2} s")),
             None if flip.is_some() => failures.push(format!(
-                "not back within {RECOVERY_TOL_M} m of the rally point by the end of the hold"
+                "not back within {} m of the rally point by the end of the hold",
+                c.recovery_tol_m
             )),
             None => {}
         }
