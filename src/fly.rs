@@ -17,7 +17,7 @@ use mpc_sim::report;
 use crate::FlyArgs;
 
 /// Ctrl-C sets the returned flag (once per process; a second handler cannot be installed).
-fn interrupt_flag() -> Arc<AtomicBool> {
+pub(crate) fn interrupt_flag() -> Arc<AtomicBool> {
     let stop = Arc::new(AtomicBool::new(false));
     let s = Arc::clone(&stop);
     if let Err(e) = ctrlc::set_handler(move || s.store(true, Ordering::Relaxed)) {
@@ -26,16 +26,11 @@ fn interrupt_flag() -> Arc<AtomicBool> {
     stop
 }
 
-fn open(address: &str, as_px4: bool) -> Result<Link, String> {
+fn open(address: &str) -> Result<Link, String> {
     let addr: Address = address
         .parse()
         .map_err(|e| format!("--connect {address}: {e}"))?;
-    let link = if as_px4 {
-        Link::open_as(&addr, messages::PX4_SYSTEM, messages::PX4_COMPONENT)
-    } else {
-        Link::open(&addr, messages::PX4_SYSTEM)
-    };
-    link.map_err(|e| format!("--connect {address}: {e}"))
+    Link::open(&addr, messages::PX4_SYSTEM).map_err(|e| format!("--connect {address}: {e}"))
 }
 
 fn mission_kind(name: &str) -> Result<MissionKind, String> {
@@ -98,7 +93,7 @@ pub(crate) fn fly(args: &FlyArgs) -> ExitCode {
         eprintln!("error: {e}");
         return ExitCode::FAILURE;
     }
-    let link = match open(&args.connect, false) {
+    let link = match open(&args.connect) {
         Ok(l) => l,
         Err(e) => {
             eprintln!("error: {e}");

@@ -2,8 +2,6 @@
 //! `mpcc fly` to fly against.
 
 use std::process::ExitCode;
-use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
 
 use firmware_shim::messages;
 use firmware_shim::transport::{Address, Link};
@@ -13,16 +11,7 @@ use firmware_shim::vehicle::{
 use mpc_sim::estimator::EstimatorConfig;
 
 use crate::SitlArgs;
-
-/// Ctrl-C sets the returned flag (once per process; a second handler cannot be installed).
-fn interrupt_flag() -> Arc<AtomicBool> {
-    let stop = Arc::new(AtomicBool::new(false));
-    let s = Arc::clone(&stop);
-    if let Err(e) = ctrlc::set_handler(move || s.store(true, Ordering::Relaxed)) {
-        eprintln!("warning: Ctrl-C will not stop cleanly: {e}");
-    }
-    stop
-}
+use crate::fly::interrupt_flag;
 
 /// The link, sending as PX4 (system 1, component 1).
 fn open_as_px4(address: &str) -> Result<Link, String> {

@@ -27,8 +27,8 @@
 //! * [`transport`]: the link (udpin, udpout, serial) through `mavlink::connect`, with
 //!   non-blocking reads and typed address errors;
 //! * [`sitl`]: the simulated PX4's commander (PX4's offboard rules: OFFBOARD only while
-//!   setpoints stream, arming checks, the offboard-loss failsafe, automatic disarm after an
-//!   AUTO landing, message intervals);
+//!   setpoints stream, arming checks, the offboard-loss failsafe, PX4's land detector and its
+//!   automatic disarm in any mode, message intervals, TIMESYNC, SIH's parameters);
 //! * [`vehicle`]: the simulated PX4 vehicle (`mpcc sitl`): the commander around the
 //!   simulator's plant and rate loop, flown by the offboard setpoint or by PX4-like position
 //!   and attitude control (hold, land, return), sending PX4's messages in PX4's frames, with

@@ -15,7 +15,9 @@
 //! 3. MAV_CMD_COMPONENT_ARM_DISARM arm, until acknowledged and the HEARTBEAT shows armed;
 //! 4. flying: the MPC's setpoints fly the vehicle;
 //! 5. when the mission is over ([`Session::finish`], on the ground): AUTO.LAND, which makes
-//!    PX4 disarm on its own ([`Phase::Done`] once the HEARTBEAT shows it disarmed).
+//!    PX4 disarm on its own, and a disarm command as soon as PX4's land detector says landed
+//!    (EXTENDED_SYS_STATE `ON_GROUND`) ([`Phase::Done`] once the HEARTBEAT shows it
+//!    disarmed).
 //!
 //! Failsafes while flying:
 //!
@@ -34,7 +36,7 @@
 
 use mavlink::dialects::common::{MavCmd, MavMessage};
 
-use crate::messages::{self, Command, Inbound, Px4Mode};
+use crate::messages::{self, Command, Inbound, LandedState, Px4Mode};
 
 /// Timing of the session. Times in seconds of the caller's clock (clock it from the
 /// vehicle's timestamps in simulation: PX4 scales its timeouts with the speed-up factor).
@@ -252,6 +254,7 @@ pub struct Session {
     last_odometry: Option<f64>,
     px4_mode: Option<Px4Mode>,
     armed: bool,
+    on_ground: bool,
     solver_failures: u32,
     abort: bool,
     trip: Option<Failsafe>,
@@ -270,6 +273,7 @@ impl Session {
             last_odometry: None,
             px4_mode: None,
             armed: false,
+            on_ground: false,
             solver_failures: 0,
             abort: false,
             trip: None,
@@ -301,6 +305,7 @@ impl Session {
                 self.px4_mode = Some(mode);
             }
             Inbound::Odometry(_) => self.on_odometry(now),
+            Inbound::Landed(l) => self.on_ground = l == LandedState::OnGround,
             Inbound::Ack {
                 command,
                 accepted,
@@ -316,8 +321,9 @@ impl Session {
                             // Not fatal: PX4 keeps its default rate.
                             self.pending = None;
                         } else if matches!(self.phase, Phase::Failsafe(_) | Phase::Finishing) {
-                            // Keep asking: a failsafe has no better option.
-                            p.sent_at = f64::NEG_INFINITY;
+                            // Keep asking, an acknowledgement timeout later: a failsafe has
+                            // no better option.
+                            p.sent_at = now;
                         } else {
                             self.phase = Phase::Failed(SessionError::Refused(command));
                             self.pending = None;
@@ -510,10 +516,15 @@ impl Session {
             }
             Phase::Finishing => {
                 // Disarmed is done, whether PX4's AUTO.LAND did it or its land detector did
-                // before (PX4 may refuse AUTO.LAND on a disarmed vehicle).
+                // before (PX4 may refuse AUTO.LAND on a disarmed vehicle). Once PX4's land
+                // detector says landed, disarm rather than wait for its own disarm (seconds
+                // on the ground, armed).
+                let disarming = self.pending.is_some_and(|p| p.cmd == Command::Disarm);
                 if !self.armed {
                     self.pending = None;
                     self.phase = Phase::Done;
+                } else if self.on_ground && !disarming {
+                    self.start(Command::Disarm, now, &mut tick.send);
                 }
             }
             Phase::Failsafe(_) | Phase::Failed(_) | Phase::Done => {}

@@ -658,7 +658,6 @@ impl Pilot {
         }
         if let Inbound::Landed(l) = inbound {
             self.px4_landed = Some(l);
-            return;
         }
         if let Inbound::Timesync { ts1, .. } = inbound {
             self.round_trip.on_answer(ts1 as f64 * 1e-9, wall);

@@ -1,7 +1,7 @@
 //! The offboard session against PX4's rules, with a scripted PX4 and a fake clock.
 
 use firmware_shim::link::{Deviation, Failsafe, LinkConfig, Phase, Session, SessionError};
-use firmware_shim::messages::{Inbound, OdometryNed, Px4Mode};
+use firmware_shim::messages::{Inbound, LandedState, OdometryNed, Px4Mode};
 use mavlink::dialects::common::{MavCmd, MavMessage};
 
 const DT: f64 = 0.01;
@@ -495,4 +495,36 @@ fn off_mission_trips_ask_for_auto_land_only_while_flying() {
     );
     assert_eq!(modes.first().map(|p| *p as u8), Some(6), "AUTO.LAND");
     assert_eq!(f.mode(), Some(Px4Mode::Land));
+}
+
+#[test]
+fn once_px4_says_landed_the_finished_session_disarms_it() {
+    let mut s = Session::new(LinkConfig::default(), 0.0);
+    let mut px4 = Px4::new();
+    run(&mut s, &mut px4, 0.0, 3.0);
+    s.finish();
+    s.tick(3.0);
+    assert_eq!(s.phase(), Phase::Finishing);
+    // Still in the air: no disarm.
+    s.on_inbound(&Inbound::Landed(LandedState::InAir), 3.1);
+    assert!(disarms(&s.tick(3.1).send).is_empty());
+    s.on_inbound(&Inbound::Landed(LandedState::OnGround), 3.2);
+    let sent = s.tick(3.2).send;
+    assert_eq!(disarms(&sent).len(), 1, "{sent:?}");
+    // Not asked again before its acknowledgement times out.
+    assert!(disarms(&s.tick(3.3).send).is_empty());
+    px4.armed = false;
+    px4.answer(&mut s, &[], 3.4);
+    s.tick(3.4);
+    assert_eq!(s.phase(), Phase::Done);
+}
+
+/// The disarm commands (ARM_DISARM with param1 = 0) among `msgs`.
+fn disarms(msgs: &[MavMessage]) -> Vec<&MavMessage> {
+    msgs.iter()
+        .filter(|m| {
+            matches!(m, MavMessage::COMMAND_LONG(c)
+                if c.command == MavCmd::MAV_CMD_COMPONENT_ARM_DISARM && c.param1 == 0.0)
+        })
+        .collect()
 }
