@@ -527,7 +527,14 @@ impl Session {
                     self.start(Command::Disarm, now, &mut tick.send);
                 }
             }
-            Phase::Failsafe(_) | Phase::Failed(_) | Phase::Done => {}
+            Phase::Failsafe(_) => {
+                // PX4 flies now; once its land detector says landed, disarm.
+                let disarming = self.pending.is_some_and(|p| p.cmd == Command::Disarm);
+                if self.armed && self.on_ground && !disarming {
+                    self.start(Command::Disarm, now, &mut tick.send);
+                }
+            }
+            Phase::Failed(_) | Phase::Done => {}
         }
         tick.mpc_in_control = self.phase == Phase::Flying;
         tick

@@ -65,6 +65,9 @@ pub const ODOMETRY_PREFERENCE_US: u64 = 500_000;
 pub const MAX_PREDICTION_S: f64 = 0.25;
 /// The least bound on a state's delay that TIMESYNC's round trips set \[s\].
 pub const MIN_DELAY_BOUND_S: f64 = 0.005;
+/// After a failsafe PX4 flies the vehicle; the loop waits this long for it to disarm, then
+/// ends (the flight has failed either way) \[s\].
+pub const HANDOVER_WAIT_S: f64 = 30.0;
 /// TIMESYNC requests go out this often \[s, wall clock\].
 pub const TIMESYNC_PERIOD_S: f64 = 0.5;
 /// Height above the start point and speed below which the vehicle counts as on the ground.
@@ -624,12 +627,13 @@ impl Pilot {
         match s.phase() {
             Phase::Done | Phase::Failed(_) => true,
             Phase::Failsafe(_) => {
-                let settled = self
+                // Since the failsafe: PX4 flies; done once it has disarmed, or given up on
+                // after HANDOVER_WAIT_S (a crashed vehicle PX4 never calls landed).
+                let since = self
                     .failsafes
                     .last()
-                    .filter(|_| self.clock.started())
-                    .is_some_and(|(_, t)| self.clock.last().is_some_and(|l| l - t > 1.5));
-                !s.armed() && settled
+                    .and_then(|(_, t)| self.clock.last().map(|l| l - t));
+                since.is_some_and(|d| (!s.armed() && d > 1.5) || d > HANDOVER_WAIT_S)
             }
             _ => false,
         }
@@ -969,8 +973,12 @@ impl Pilot {
         }
         if self.finished() && self.finished_at.is_none() {
             self.finished_at = Some(now);
-            let what = match self.session.as_ref().map(Session::phase) {
-                Some(Phase::Failed(e)) => format!("session failed: {e}"),
+            let what = match self.session.as_ref().map(|s| (s.phase(), s.armed())) {
+                Some((Phase::Failed(e), _)) => format!("session failed: {e}"),
+                Some((_, true)) => format!(
+                    "given up: PX4 still armed in {} {HANDOVER_WAIT_S} s after the failsafe",
+                    px4_mode.map_or("?".to_string(), |m| m.to_string())
+                ),
                 _ => "done: PX4 disarmed".to_string(),
             };
             self.event(now, what);

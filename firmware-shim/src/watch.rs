@@ -4,9 +4,9 @@
 //! * **Ground.** PX4's height estimate can be decimetres off at touchdown (EKF2 on GNSS:
 //!   0.2-0.7 m on SIH), so a height threshold alone cannot tell when the vehicle is down. In
 //!   the mission's landing the vehicle is down when PX4's land detector says so
-//!   (EXTENDED_SYS_STATE `ON_GROUND`) or when the descent has stalled: the reference
-//!   descends but the vehicle has not for [`WatchConfig::stall_time`], below
-//!   [`WatchConfig::stall_height`]. Elsewhere, the estimate's height and speed near zero (the
+//!   (EXTENDED_SYS_STATE `ON_GROUND`) or when the descent has stalled: over
+//!   [`WatchConfig::stall_time`] the reference descended but the estimate's height fell by
+//!   less than 30 % of that, below [`WatchConfig::stall_height`]. Elsewhere, the estimate's height and speed near zero (the
 //!   take-off).
 //! * **Off the mission.** The vehicle has left its mission when, outside the landing, it is
 //!   far below the reference ([`WatchConfig::below`], more around the flip), far from it
@@ -14,11 +14,16 @@
 //!   each for a while, or on the ground (PX4's land detector) after take-off. The controller
 //!   then stops the mission: a vehicle that did not fly its mission never passes.
 
+use std::collections::VecDeque;
+
 use mpc_sim::mission::{Phase, RefPoint};
 use nalgebra::Vector3;
 
 use crate::link::Deviation;
 use crate::pilot::{GROUND_HEIGHT_M, GROUND_SPEED_M_S, State};
+
+/// A stalled descent must stay stalled this long \[s\].
+pub const STALL_CONFIRM_S: f64 = 0.1;
 
 /// Thresholds of the [`Watch`].
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -38,7 +43,7 @@ pub struct WatchConfig {
     pub inverted: f64,
     /// See [`WatchConfig::inverted`] \[s\].
     pub inverted_time: f64,
-    /// The landing's descent stalled this long: on the ground \[s\].
+    /// The landing's descent is judged over this long \[s\].
     pub stall_time: f64,
     /// Only below this height above the start point \[m\] (the estimate's error included).
     pub stall_height: f64,
@@ -46,7 +51,7 @@ pub struct WatchConfig {
 
 impl Default for WatchConfig {
     /// 1.5 m below for 0.5 s (2.5 m around the flip), 3 m off for 1 s, tilted over 100 deg
-    /// for 0.25 s, a landing stalled for 0.5 s below 1.5 m.
+    /// for 0.25 s, a landing's descent judged over 0.5 s below 1.5 m.
     fn default() -> Self {
         Self {
             below: 1.5,
@@ -95,6 +100,7 @@ pub struct Watch {
     off: Since,
     inverted: Since,
     stall: Since,
+    heights: VecDeque<(f64, f64)>,
 }
 
 impl Watch {
@@ -119,7 +125,10 @@ impl Watch {
     ) -> Seen {
         self.airborne |= height > 0.3;
         let on_ground = match phase {
-            Phase::Land => px4_on_ground || self.stalled(t, s, r, height),
+            Phase::Land => {
+                let stalled = self.stalled(t, r, height);
+                px4_on_ground || self.stall.held(stalled, t, STALL_CONFIRM_S)
+            }
             Phase::Landed => true,
             _ => height < GROUND_HEIGHT_M && s.v.norm() < GROUND_SPEED_M_S,
         };
@@ -134,10 +143,25 @@ impl Watch {
         }
     }
 
-    /// The landing's reference descends, the vehicle does not, low enough.
-    fn stalled(&mut self, t: f64, s: &State, r: &RefPoint, height: f64) -> bool {
-        let stalled = r.v.z < -0.1 && s.v.z > -0.05 && height < self.cfg.stall_height;
-        self.stall.held(stalled, t, self.cfg.stall_time)
+    /// The landing's reference descends, the vehicle does not, low enough: over the last
+    /// [`WatchConfig::stall_time`] the estimate's height fell by less than 30 % of the
+    /// reference's descent. Judged on the height, not on the estimate's vertical speed:
+    /// EKF2's was seen reading 0.27 m/s down for seconds on the ground.
+    fn stalled(&mut self, t: f64, r: &RefPoint, height: f64) -> bool {
+        let window = self.cfg.stall_time;
+        self.heights.push_back((t, height));
+        while self.heights.get(1).is_some_and(|(t1, _)| t - t1 >= window) {
+            self.heights.pop_front();
+        }
+        let Some(&(t0, h0)) = self.heights.front() else {
+            return false;
+        };
+        let span = t - t0;
+        let expected = -r.v.z * span;
+        span >= window
+            && r.v.z < -0.1
+            && h0 - height < 0.3 * expected
+            && height < self.cfg.stall_height
     }
 
     fn deviation(

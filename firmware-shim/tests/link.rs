@@ -528,3 +528,20 @@ fn disarms(msgs: &[MavMessage]) -> Vec<&MavMessage> {
         })
         .collect()
 }
+
+#[test]
+fn after_a_failsafe_px4_flies_and_is_disarmed_once_it_says_landed() {
+    let mut s = Session::new(LinkConfig::default(), 0.0);
+    let mut px4 = Px4::new();
+    run(&mut s, &mut px4, 0.0, 3.0);
+    // PX4's own failsafe takes the vehicle (DESCEND after a crash).
+    px4.mode = Px4Mode::Other(4, 12);
+    px4.answer(&mut s, &[], 3.0);
+    assert_eq!(s.tick(3.01).failsafe, Some(Failsafe::Px4LeftOffboard));
+    assert!(
+        disarms(&s.tick(3.1).send).is_empty(),
+        "not while in the air"
+    );
+    s.on_inbound(&Inbound::Landed(LandedState::OnGround), 3.2);
+    assert_eq!(disarms(&s.tick(3.2).send).len(), 1);
+}

@@ -131,3 +131,25 @@ fn a_profile_file_round_trips_and_bad_ones_are_refused_by_field() {
         ProfileError::File { .. }
     ));
 }
+
+#[test]
+fn the_ramped_flip_reference_tends_to_the_papers_closed_form_as_its_ramps_shorten() {
+    use mpc_sim::mission::{FlipProfile, flip_state, ramped_flip_state};
+    use nalgebra::Vector3;
+    let (p0, v0) = (Vector3::new(4.0, 0.0, 2.5), Vector3::new(0.0, 0.0, 2.5));
+    let rate = 5.0 * PI;
+    let profile = FlipProfile {
+        rate,
+        accel: 1e7,
+        angle: 2.0 * PI,
+    };
+    for tau in [0.05, 0.2, 0.4] {
+        let (p, v, a, q) = flip_state(&p0, &v0, rate, 5.0, 0.3, tau);
+        let (pr, vr, ar, qr, w) = ramped_flip_state(&p0, &v0, &profile, 5.0, 0.3, tau);
+        assert!((p - pr).norm() < 1e-4, "{tau}: {p} {pr}");
+        assert!((v - vr).norm() < 1e-3, "{tau}: {v} {vr}");
+        if tau < 0.39 {
+            assert!((a - ar).norm() < 1e-2 && q.angle_to(&qr) < 1e-3 && (w - rate).abs() < 1e-9);
+        }
+    }
+}

@@ -67,25 +67,41 @@ fn airborne() -> Watch {
     w
 }
 
-#[test]
-fn a_landing_whose_estimate_is_half_a_metre_high_is_down_when_the_descent_stalls() {
-    let mut w = airborne();
-    // The estimate says 0.5 m, the reference still descends, the vehicle does not.
-    let s = state([0.0, 0.0, 0.5], [0.0, 0.0, 0.0], 0.0);
+/// A landing at 100 Hz from `t0`: the estimate's height `h(t)` with a vertical speed `vz`
+/// (EKF2's, which may be wrong), the reference descending at 0.3 m/s; when the watch first
+/// says down.
+fn landing(watch: &mut Watch, t0: f64, h: impl Fn(f64) -> f64, vz: f64, px4: bool) -> Option<f64> {
     let r = reference(Phase::Land, [0.0, 0.0, -0.5], [0.0, 0.0, -0.3]);
-    let (dev, ground) = hold(&mut w, 1.0, 1.0, Phase::Land, &s, &r, false);
-    assert_eq!(dev, None, "no deviation in the landing");
-    let t = ground.expect("down");
-    assert!((0.49..0.52).contains(&t), "after the stall time: {t}");
-    // Still descending at 0.3 m/s: not down, whatever the height says.
-    let mut w = airborne();
-    let s = state([0.0, 0.0, -0.2], [0.0, 0.0, -0.3], 0.0);
-    assert_eq!(hold(&mut w, 1.0, 1.0, Phase::Land, &s, &r, false).1, None);
-    // PX4's land detector: down at once.
-    let mut w = airborne();
-    let s = state([0.0, 0.0, 0.6], [0.0, 0.0, -0.3], 0.0);
+    (0..200).find_map(|i| {
+        let t = i as f64 * 0.01;
+        let s = state([0.0, 0.0, h(t)], [0.0, 0.0, vz], 0.0);
+        let seen = watch.observe(t0 + t, Phase::Land, &s, &r, h(t), px4);
+        assert_eq!(seen.deviation, None, "no deviation in the landing");
+        seen.on_ground.then_some(t)
+    })
+}
+
+#[test]
+fn a_landing_is_down_when_the_estimates_height_stops_falling_whatever_its_speed_says() {
+    // The estimate says 0.5 m up and 0.27 m/s down (EKF2 on the ground, as seen on SIH) but
+    // its height does not fall: down once the 0.5 s window is full, and 0.1 s more.
+    let t = landing(&mut airborne(), 1.0, |_| 0.5, -0.27, false).expect("down");
+    assert!((0.59..0.62).contains(&t), "{t}");
+    // Falling at the reference's 0.3 m/s, or at half of it: still flying, whatever the
+    // height says.
     assert_eq!(
-        hold(&mut w, 1.0, 0.1, Phase::Land, &s, &r, true).1,
+        landing(&mut airborne(), 1.0, |t| 0.2 - 0.3 * t, -0.3, false),
+        None
+    );
+    assert_eq!(
+        landing(&mut airborne(), 1.0, |t| 1.0 - 0.15 * t, 0.0, false),
+        None
+    );
+    // A stall high up is no touchdown.
+    assert_eq!(landing(&mut airborne(), 1.0, |_| 2.0, 0.0, false), None);
+    // PX4's land detector: down at once.
+    assert_eq!(
+        landing(&mut airborne(), 1.0, |t| 0.6 - 0.3 * t, -0.3, true),
         Some(0.0)
     );
 }
