@@ -302,6 +302,31 @@ impl StateInput {
     }
 }
 
+/// The touchdown's speed is the fastest descent over this long \[s\] ...
+pub const TOUCHDOWN_WINDOW_S: f64 = 0.3;
+/// ... in the last this long before the vehicle was found down (the landing's stall takes
+/// 0.6 s to judge) \[s\].
+pub const TOUCHDOWN_LOOKBACK_S: f64 = 1.2;
+
+/// The fastest descent [m/s, positive down] over any `window` \[s\] of `heights` (time,
+/// height), from the heights themselves: EKF2's vertical speed was seen 0.45 m/s off the
+/// truth in a landing while its height followed it.
+pub fn fastest_descent(heights: &std::collections::VecDeque<(f64, f64)>, window: f64) -> f64 {
+    let mut fastest: f64 = 0.0;
+    let mut j = 0;
+    for (i, &(t0, h0)) in heights.iter().enumerate() {
+        j = j.max(i);
+        while heights.get(j).is_some_and(|(t1, _)| t1 - t0 < window) {
+            j += 1;
+        }
+        let Some(&(t1, h1)) = heights.get(j) else {
+            break;
+        };
+        fastest = fastest.max((h0 - h1) / (t1 - t0));
+    }
+    fastest
+}
+
 /// Time constant of PX4's rate loop and rotors as the prediction models them \[s\]: the body
 /// rates and the thrust follow the setpoint as first-order lags.
 pub const RESPONSE_TIME_CONSTANT: f64 = 0.03;
@@ -490,6 +515,8 @@ struct Flight {
     /// The setpoints of the last [`MAX_PREDICTION_S`] (vehicle time sent, command).
     history: std::collections::VecDeque<(f64, InnerCommand)>,
     watch: Watch,
+    /// The estimate's heights of the last [`TOUCHDOWN_LOOKBACK_S`] (vehicle time, z).
+    heights: std::collections::VecDeque<(f64, f64)>,
 }
 
 /// The controller loop. See the [module documentation](self).
@@ -842,10 +869,18 @@ impl Pilot {
         {
             session.trip(Failsafe::OffMission(d));
         }
+        f.heights.push_back((s.t, s.p.z));
+        while f
+            .heights
+            .front()
+            .is_some_and(|(t0, _)| s.t - t0 > TOUCHDOWN_LOOKBACK_S)
+        {
+            f.heights.pop_front();
+        }
         if on_ground && !f.on_ground && f.airborne {
             f.touchdown = Some(Touchdown {
                 t,
-                vertical_speed: f.last_logged.map_or(s.v.z, |p| p.v.z.min(s.v.z)),
+                vertical_speed: -fastest_descent(&f.heights, TOUCHDOWN_WINDOW_S),
                 p: s.p,
             });
         }
@@ -1080,6 +1115,7 @@ impl Pilot {
             airborne: false,
             history: std::collections::VecDeque::new(),
             watch: Watch::default(),
+            heights: std::collections::VecDeque::new(),
         });
         self.event(now, "flying: mission started".to_string());
     }

@@ -1427,3 +1427,30 @@ fn a_flip_beyond_the_vehicle_is_refused_before_arming() {
     assert!(ls.vehicle.record().armed_at.is_empty());
     assert_eq!(ls.setpoints().count(), 0);
 }
+
+#[test]
+fn the_touchdown_speed_is_the_fastest_descent_of_the_heights() {
+    use firmware_shim::pilot::fastest_descent;
+    use std::collections::VecDeque;
+    // 0.3 m/s down, 0.7 m/s down for 0.4 s, then at rest (100 Hz).
+    let mut h = 1.0;
+    let heights: VecDeque<(f64, f64)> = (0..150)
+        .map(|i| {
+            let t = f64::from(i) * 0.01;
+            let v = if t < 0.5 {
+                0.3
+            } else if t < 0.9 {
+                0.7
+            } else {
+                0.0
+            };
+            h -= v * 0.01;
+            (t, h)
+        })
+        .collect();
+    let d = fastest_descent(&heights, 0.3);
+    assert!((d - 0.7).abs() < 0.02, "{d}");
+    assert_eq!(fastest_descent(&VecDeque::new(), 0.3), 0.0);
+    let rest: VecDeque<(f64, f64)> = (0..50).map(|i| (f64::from(i) * 0.01, 0.2)).collect();
+    assert_eq!(fastest_descent(&rest, 0.3), 0.0);
+}
