@@ -27,7 +27,12 @@
 //!   the previous plan, from the runtime): request return mode;
 //! * operator abort ([`Session::abort`]): request AUTO.LAND, not just exit;
 //! * PX4 leaving OFFBOARD on its own (its own failsafe, the pilot): the session stops flying
-//!   and reports it.
+//!   and reports it;
+//! * PX4 disarming the vehicle (HEARTBEAT's armed flag, in any mode): the same;
+//! * the controller finding the vehicle off its mission ([`Session::trip`], the watch):
+//!   request AUTO.LAND.
+//!
+//! In a failsafe PX4 flies; once its land detector says landed, the session disarms it.
 //!
 //! A command that stays unacknowledged after [`LinkConfig::retries`] retransmissions ends the
 //! session in [`Phase::Failed`] with the reason; a failsafe command is retried the same way
