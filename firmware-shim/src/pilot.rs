@@ -68,6 +68,11 @@ pub const MIN_DELAY_BOUND_S: f64 = 0.005;
 /// After a failsafe PX4 flies the vehicle; the loop waits this long for it to disarm, then
 /// ends (the flight has failed either way) \[s\].
 pub const HANDOVER_WAIT_S: f64 = 30.0;
+/// The landing's slow final descent starts at least this high above the start point \[m\]:
+/// EKF2's height was up to 0.8 m high at touchdown on SIH, and from a flare at the
+/// simulator's 0.3 m such a vehicle met the ground at 0.74-0.99 m/s, still in the faster
+/// part of the descent.
+pub const FLARE_HEIGHT_M: f64 = 1.0;
 /// TIMESYNC requests go out this often \[s, wall clock\].
 pub const TIMESYNC_PERIOD_S: f64 = 0.5;
 /// Height above the start point and speed below which the vehicle counts as on the ground.
@@ -1098,6 +1103,7 @@ impl Pilot {
         m.rally_point += shift;
         // Stale odometry is the session's failsafe (PX4's return mode), not the mission's.
         m.pose_timeout = f64::INFINITY;
+        m.land_flare_height = m.land_flare_height.max(FLARE_HEIGHT_M);
         self.flight = Some(Flight {
             t0: now,
             home: s.p,
