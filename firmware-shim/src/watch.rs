@@ -2,12 +2,13 @@
 //! the ground and whether it is still flying its mission.
 //!
 //! * **Ground.** PX4's height estimate can be decimetres off at touchdown (EKF2 on GNSS:
-//!   0.2-0.7 m on SIH), so a height threshold alone cannot tell when the vehicle is down. In
-//!   the mission's landing the vehicle is down when PX4's land detector says so
+//!   up to 0.8 m on SIH), so a height threshold alone cannot tell when the vehicle is down.
+//!   In the mission's landing the vehicle is down when PX4's land detector says so
 //!   (EXTENDED_SYS_STATE `ON_GROUND`) or when the descent has stalled: over
 //!   [`WatchConfig::stall_time`] the reference descended but the estimate's height fell by
-//!   less than 30 % of that, below [`WatchConfig::stall_height`]. Elsewhere, the estimate's height and speed near zero (the
-//!   take-off).
+//!   less than 30 % of that, below [`WatchConfig::stall_height`]; or, at the latest, when
+//!   the reference is [`LAND_OVERRUN_M`] below the start point. Elsewhere, the estimate's
+//!   height and speed near zero (the take-off).
 //! * **Off the mission.** The vehicle has left its mission when, outside the landing, it is
 //!   far below the reference ([`WatchConfig::below`], more around the flip), far from it
 //!   ([`WatchConfig::off_course`]), upside down outside the flip ([`WatchConfig::inverted`]),
@@ -22,6 +23,9 @@ use nalgebra::Vector3;
 use crate::link::Deviation;
 use crate::pilot::{GROUND_HEIGHT_M, GROUND_SPEED_M_S, State};
 
+/// The landing's reference this far below the start point: down \[m\] (EKF2's height was
+/// up to 0.8 m off at touchdown; its correction on the ground can look like a descent).
+pub const LAND_OVERRUN_M: f64 = 1.0;
 /// A stalled descent must stay stalled this long \[s\].
 pub const STALL_CONFIRM_S: f64 = 0.1;
 
@@ -127,7 +131,10 @@ impl Watch {
         let on_ground = match phase {
             Phase::Land => {
                 let stalled = self.stalled(t, r, height);
-                px4_on_ground || self.stall.held(stalled, t, STALL_CONFIRM_S)
+                // The reference's height over the start point: far below it, the vehicle
+                // is down whatever the estimate says (it may drift down on the ground).
+                let overrun = r.p.z - s.p.z + height < -LAND_OVERRUN_M;
+                px4_on_ground || overrun || self.stall.held(stalled, t, STALL_CONFIRM_S)
             }
             Phase::Landed => true,
             _ => height < GROUND_HEIGHT_M && s.v.norm() < GROUND_SPEED_M_S,

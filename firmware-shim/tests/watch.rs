@@ -173,3 +173,22 @@ fn three_metres_off_course_for_a_second_leaves_the_mission() {
     assert_eq!(d, Deviation::OffCourse);
     assert!((0.99..1.02).contains(&t), "{t}");
 }
+
+#[test]
+fn a_landing_whose_reference_is_a_metre_below_the_ground_is_down() {
+    // The estimate drifts down on the ground as fast as the reference (EKF2 correcting its
+    // height): no stall, but the reference passes 1 m below the start point.
+    let mut w = airborne();
+    let r = |t: f64| reference(Phase::Land, [0.0, 0.0, 0.3 - 0.3 * t], [0.0, 0.0, -0.3]);
+    let down = (0..1000).find_map(|i| {
+        let t = f64::from(i) * 0.01;
+        let h = 0.5 - 0.3 * t;
+        let s = state([0.0, 0.0, h], [0.0, 0.0, -0.3], 0.0);
+        w.observe(1.0 + t, Phase::Land, &s, &r(t), h, false)
+            .on_ground
+            .then_some(t)
+    });
+    let t = down.expect("down");
+    // 0.3 - 0.3 t < -1.0 from t = 4.33 s.
+    assert!((4.33..4.35).contains(&t), "{t}");
+}
