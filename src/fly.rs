@@ -1,6 +1,7 @@
 //! `mpcc fly`: fly a mission through PX4 over MAVLink with the generated NMPC (`mpcc sitl`,
 //! the simulated PX4 vehicle to fly it against, is in `sitl.rs`).
 
+use std::net::SocketAddr;
 use std::process::ExitCode;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -10,7 +11,9 @@ use firmware_shim::messages;
 use firmware_shim::pilot::{self, Pilot, PilotConfig};
 use firmware_shim::profile::VehicleProfile;
 use firmware_shim::setpoint::ThrustMap;
-use firmware_shim::transport::{Address, Link};
+use firmware_shim::signing::SigningKey;
+use firmware_shim::transport::{Address, Link, LinkOptions, LinkStats};
+use firmware_shim::trust::Trust;
 use mpc_sim::mission::{G, MissionKind};
 use mpc_sim::report;
 
@@ -26,11 +29,29 @@ pub(crate) fn interrupt_flag() -> Arc<AtomicBool> {
     stop
 }
 
-fn open(address: &str) -> Result<Link, String> {
+/// The companion's link: locked onto PX4 (the first PX4 HEARTBEAT's sender, or
+/// `--autopilot`), signed with `--signing-key`.
+fn open(args: &FlyArgs) -> Result<Link, String> {
+    let address = &args.connect;
     let addr: Address = address
         .parse()
         .map_err(|e| format!("--connect {address}: {e}"))?;
-    Link::open(&addr, messages::PX4_SYSTEM).map_err(|e| format!("--connect {address}: {e}"))
+    let mut options = LinkOptions::companion(messages::PX4_SYSTEM);
+    if let Some(a) = &args.autopilot {
+        if !matches!(addr, Address::UdpIn { .. }) {
+            return Err(format!(
+                "--autopilot {a}: a setting of udpin links (udpout takes only its destination)"
+            ));
+        }
+        let to: SocketAddr = a.parse().map_err(|_| {
+            format!("--autopilot {a}: give HOST:PORT with a numeric host, e.g. 127.0.0.1:14580")
+        })?;
+        options.trust = Trust::Fixed(to);
+    }
+    if let Some(k) = &args.signing_key {
+        options.signing = Some(SigningKey::load(k).map_err(|e| format!("--signing-key: {e}"))?);
+    }
+    Link::open_with(&addr, &options).map_err(|e| format!("--connect {address}: {e}"))
 }
 
 fn mission_kind(name: &str) -> Result<MissionKind, String> {
@@ -93,7 +114,7 @@ pub(crate) fn fly(args: &FlyArgs) -> ExitCode {
         eprintln!("error: {e}");
         return ExitCode::FAILURE;
     }
-    let link = match open(&args.connect) {
+    let link = match open(args) {
         Ok(l) => l,
         Err(e) => {
             eprintln!("error: {e}");
@@ -163,6 +184,7 @@ pub(crate) fn fly(args: &FlyArgs) -> ExitCode {
             args.connect,
             started.elapsed().as_secs_f64()
         );
+        eprintln!("{}", link_line(&link.stats()));
         return ExitCode::FAILURE;
     }
     if timed_out {
@@ -175,7 +197,8 @@ pub(crate) fn fly(args: &FlyArgs) -> ExitCode {
         eprintln!("error: {f}");
         return ExitCode::FAILURE;
     }
-    let rep = pilot.report();
+    let mut rep = pilot.report();
+    rep.link = Some(link.stats());
     if args.json {
         match serde_json::to_string(&rep) {
             Ok(s) => println!("{s}"),
@@ -244,6 +267,9 @@ fn print_link_figures(rep: &pilot::FlightReport) {
     for (f, t) in &rep.failsafes {
         println!("failsafe: {f} at {t:.3} s");
     }
+    if let Some(l) = &rep.link {
+        println!("{}", link_line(l));
+    }
     println!(
         "link: {} states ({} dropped: duplicate, overtaken or not finite), {} setpoints \
          ({} clamped, {} replaced)",
@@ -269,4 +295,34 @@ fn print_link_figures(rep: &pilot::FlightReport) {
         rep.solver_us.mean,
         rep.solver_us.p99
     );
+}
+
+/// The link's trust in one line: the peer, what was ignored, the signatures refused.
+fn link_line(l: &LinkStats) -> String {
+    let t = &l.trust;
+    let mut out = match &t.peer {
+        Some(p) => format!("autopilot: {p}"),
+        None => "autopilot: none locked (no PX4 HEARTBEAT taken)".to_string(),
+    };
+    for r in &t.relocks {
+        out += &format!(", relocked from {} to {} at {:.1} s", r.from, r.to, r.at_s);
+    }
+    out += &format!(
+        "; ignored {} datagrams from {} other senders, {} before the lock, {} not MAVLink 2",
+        t.ignored, t.ignored_senders, t.before_lock, l.malformed
+    );
+    if l.signing {
+        out += &format!(
+            "; signed, refused {} unsigned, {} with another key, {} replayed frames",
+            l.unsigned, l.bad_signature, l.replayed
+        );
+        if l.bad_signature > 0 && t.peer.is_none() {
+            out += " (is the key the one PX4 has?)";
+        } else if l.unsigned > 0 && t.peer.is_none() {
+            out += " (PX4 does not sign: give it the key, docs/shim.md \"Link security\")";
+        }
+    } else {
+        out += "; not signed";
+    }
+    out
 }

@@ -99,6 +99,15 @@ struct FlyArgs {
     /// The profile flown is written to OUT/vehicle.json.
     #[arg(long, value_name = "FILE")]
     vehicle: Option<PathBuf>,
+    /// With a udpin link, take datagrams only from PX4 at this address (HOST:PORT; PX4
+    /// SITL's offboard link sends from 127.0.0.1:14580). Default: the sender of the first
+    /// PX4 HEARTBEAT.
+    #[arg(long, value_name = "HOST:PORT")]
+    autopilot: Option<String>,
+    /// Sign every MAVLink 2 frame with this key and take only frames signed with it (a file
+    /// of 32 bytes or 64 hexadecimal digits; docs/shim.md, "Link security").
+    #[arg(long, value_name = "FILE")]
+    signing_key: Option<PathBuf>,
     #[command(flatten)]
     shape: MissionShape,
     /// Give up (and land) after this long [s].
@@ -154,6 +163,10 @@ struct SitlArgs {
     /// 0 with --perfect-sensing).
     #[arg(long, value_name = "M", allow_hyphen_values = true)]
     height_bias: Option<f64>,
+    /// Sign every MAVLink 2 frame with this key and take only frames signed with it (the
+    /// same key file as `mpcc fly --signing-key`).
+    #[arg(long, value_name = "FILE")]
+    signing_key: Option<PathBuf>,
     /// Print the summary as one JSON object on stdout.
     #[arg(long)]
     json: bool,

@@ -1,10 +1,12 @@
 //! `mpcc sitl`: the simulated PX4 vehicle (`firmware_shim::vehicle`) on a MAVLink link, for
 //! `mpcc fly` to fly against.
 
+use std::path::Path;
 use std::process::ExitCode;
 
 use firmware_shim::messages;
-use firmware_shim::transport::{Address, Link};
+use firmware_shim::signing::SigningKey;
+use firmware_shim::transport::{Address, Link, LinkOptions};
 use firmware_shim::vehicle::{
     Airframe, ClockJump, HEIGHT_BIAS_RAMP, SimVehicle, VehicleConfig, VehicleConfigError,
 };
@@ -13,13 +15,16 @@ use mpc_sim::estimator::EstimatorConfig;
 use crate::SitlArgs;
 use crate::fly::interrupt_flag;
 
-/// The link, sending as PX4 (system 1, component 1).
-fn open_as_px4(address: &str) -> Result<Link, String> {
+/// The link, sending as PX4 (system 1, component 1), signed with `key` if given.
+fn open_as_px4(address: &str, key: Option<&Path>) -> Result<Link, String> {
     let addr: Address = address
         .parse()
         .map_err(|e| format!("--connect {address}: {e}"))?;
-    Link::open_as(&addr, messages::PX4_SYSTEM, messages::PX4_COMPONENT)
-        .map_err(|e| format!("--connect {address}: {e}"))
+    let mut options = LinkOptions::autopilot(messages::PX4_SYSTEM, messages::PX4_COMPONENT);
+    if let Some(k) = key {
+        options.signing = Some(SigningKey::load(k).map_err(|e| format!("--signing-key: {e}"))?);
+    }
+    Link::open_with(&addr, &options).map_err(|e| format!("--connect {address}: {e}"))
 }
 
 /// The option a bad vehicle setting came from.
@@ -126,7 +131,7 @@ pub(crate) fn sitl(args: &SitlArgs) -> ExitCode {
             return ExitCode::from(2);
         }
     };
-    let link = match open_as_px4(&args.connect) {
+    let link = match open_as_px4(&args.connect, args.signing_key.as_deref()) {
         Ok(l) => l,
         Err(e) => {
             eprintln!("error: {e}");

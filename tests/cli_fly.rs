@@ -320,6 +320,109 @@ fn fly_json_has_the_documented_fields() {
         "a hover needs no clamping"
     );
     assert!(num(&v, "setpoints_replaced") == 0.0);
+    // The link locked onto the simulated PX4 and ignored nothing.
+    let link = &v["link"];
+    assert!(link["trust"]["peer"].as_str().is_some(), "{link}");
+    assert_eq!(num(&link["trust"], "ignored"), 0.0, "{link}");
+    assert_eq!(num(link, "malformed"), 0.0, "{link}");
+    assert_eq!(link["signing"], false, "{link}");
+}
+
+fn key_file(name: &str, byte: u8) -> String {
+    let path = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join(name);
+    // One key as 64 hexadecimal digits, the other as raw bytes: both formats load.
+    if byte.is_multiple_of(2) {
+        std::fs::write(&path, format!("{}\n", format!("{byte:02x}").repeat(32))).unwrap();
+    } else {
+        std::fs::write(&path, [byte; 32]).unwrap();
+    }
+    path.to_str().unwrap().to_string()
+}
+
+/// `mpcc sitl --signing-key K` and `mpcc fly --signing-key K2` for a 1 s hover.
+fn signed_hover(
+    sitl_key: &str,
+    fly_key: &str,
+    timeout: &str,
+) -> (common::Finished, serde_json::Value) {
+    let port = free_port();
+    let mut sitl = spawn(&[
+        "sitl",
+        "--connect",
+        &format!("udpout:127.0.0.1:{port}"),
+        "--exit-after-flight",
+        "--duration",
+        "60",
+        "--signing-key",
+        sitl_key,
+    ]);
+    let mut fly = spawn(&[
+        "fly",
+        "--connect",
+        &format!("udpin:127.0.0.1:{port}"),
+        "--mission",
+        "hover",
+        "--hover-time",
+        "1",
+        "--signing-key",
+        fly_key,
+        "--timeout",
+        timeout,
+        "--json",
+        "--no-plots",
+    ]);
+    let f = wait_with_timeout(&mut fly, Duration::from_secs(90));
+    let _ = sitl.kill();
+    let _ = wait_with_timeout(&mut sitl, Duration::from_secs(30));
+    let v = if f.stdout.contains('{') {
+        json(&f.stdout)
+    } else {
+        serde_json::Value::Null
+    };
+    (f, v)
+}
+
+#[test]
+fn a_signed_link_flies_and_a_peer_with_another_key_is_refused() {
+    let (k1, k2) = (key_file("signing_k1", 0x5a), key_file("signing_k2", 0x33));
+    let (f, v) = signed_hover(&k1, &k1, "60");
+    assert!(
+        f.status.is_some_and(|c| c.success()),
+        "{}\n{}",
+        f.stdout,
+        f.stderr
+    );
+    assert_eq!(v["summary"]["success"], true, "{v}");
+    let link = &v["link"];
+    assert_eq!(link["signing"], true, "{link}");
+    for refused in ["unsigned", "bad_signature", "replayed"] {
+        assert_eq!(num(link, refused), 0.0, "{link}");
+    }
+    // The simulated PX4 signs with another key: nothing of it is taken, the flight never
+    // starts, and the error says why.
+    let (f, _) = signed_hover(&k2, &k1, "4");
+    assert_eq!(
+        f.status.and_then(|c| c.code()),
+        Some(1),
+        "{}\n{}",
+        f.stdout,
+        f.stderr
+    );
+    assert!(f.stderr.contains("no ODOMETRY"), "{}", f.stderr);
+    assert!(f.stderr.contains("autopilot: none locked"), "{}", f.stderr);
+    assert!(
+        f.stderr.contains("is the key the one PX4 has?"),
+        "{}",
+        f.stderr
+    );
+    let refused: u64 = f
+        .stderr
+        .split("refused 0 unsigned, ")
+        .nth(1)
+        .and_then(|r| r.split(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or(0);
+    assert!(refused > 100, "{}", f.stderr);
 }
 
 #[test]
@@ -348,6 +451,28 @@ fn fly_and_sitl_reject_bad_input_with_a_clear_message() {
             "--hover-thrust 1.5",
         ),
         (vec!["sitl", "--duration", "0"], "--duration 0"),
+        (
+            vec!["fly", "--connect", &udpin, "--signing-key", "no/such/key"],
+            "--signing-key: signing key `no/such/key`",
+        ),
+        (
+            vec!["sitl", "--signing-key", "Cargo.toml"],
+            "not 32 (nor 64 hexadecimal digits)",
+        ),
+        (
+            vec![
+                "fly",
+                "--connect",
+                "udpout:127.0.0.1:9",
+                "--autopilot",
+                "127.0.0.1:5",
+            ],
+            "a setting of udpin links",
+        ),
+        (
+            vec!["fly", "--connect", &udpin, "--autopilot", "px4:14580"],
+            "--autopilot px4:14580: give HOST:PORT",
+        ),
     ] {
         let (code, _, err) = mpcc(&args);
         assert_eq!(code, Some(2), "{args:?}: {err}");

@@ -33,6 +33,9 @@ struct Case {
     params: &'static [(&'static str, &'static str)],
     /// Extra `mpcc fly` arguments for this vehicle.
     fly_args: &'static [&'static str],
+    /// A rogue process impersonates PX4 on the companion's port during the flight
+    /// ([`Rogue`]).
+    rogue: bool,
 }
 
 /// The "agile vehicle": thrust-to-weight 4 (1 kg, 4 x 10 N), about 390 rad/s^2 of pitch
@@ -57,6 +60,7 @@ fn px4_hover_stock() {
         speed_factor: None,
         params: &[],
         fly_args: &[],
+        rogue: true,
     });
 }
 
@@ -69,6 +73,7 @@ fn px4_flip_stock() {
         speed_factor: None,
         params: &[],
         fly_args: &[],
+        rogue: false,
     });
 }
 
@@ -81,6 +86,7 @@ fn px4_flip_agile_speed_1_1() {
         speed_factor: Some("1.1"),
         params: AGILE,
         fly_args: &[],
+        rogue: false,
     });
 }
 
@@ -105,11 +111,14 @@ fn fly_and_judge(case: &Case) {
     eprintln!(
         "{}: mpcc {:?}; PX4 ran {wall:.1} s (wall clock) for a {} s log {}; ground truth {truth}",
         case.name,
-        flight.status,
+        flight.run.status,
         truth["log_duration_s"],
         log.display()
     );
-    assert_verdict(case, &flight, &truth);
+    assert_verdict(case, &flight.run, &truth);
+    if let Some(r) = &flight.rogue {
+        assert_rogue_ignored(r, &report(&flight.run.stdout));
+    }
 }
 
 // ----- prerequisites -----
@@ -245,8 +254,15 @@ impl Drop for Px4 {
 
 // ----- the flight -----
 
-/// `mpcc fly` for `case` against its PX4 instance, waited for (killed after 200 s).
-fn fly(case: &Case) -> common::Finished {
+/// A flight: mpcc's exit, output, and what the rogue saw (if there was one).
+struct Flight {
+    run: common::Finished,
+    rogue: Option<RogueSeen>,
+}
+
+/// `mpcc fly` for `case` against its PX4 instance, waited for (killed after 200 s), with
+/// the rogue beside it if the case has one.
+fn fly(case: &Case) -> Flight {
     let connect = format!("udpin:127.0.0.1:{}", 14540 + case.instance);
     let mut args: Vec<String> = [
         "fly",
@@ -272,7 +288,143 @@ fn fly(case: &Case) -> common::Finished {
         .stderr(Stdio::piped())
         .spawn()
         .expect("mpcc runs");
-    wait_with_timeout(&mut child, Duration::from_secs(200))
+    let rogue = case.rogue.then(|| Rogue::start(14540 + case.instance));
+    let run = wait_with_timeout(&mut child, Duration::from_secs(200));
+    Flight {
+        run,
+        rogue: rogue.map(Rogue::stop),
+    }
+}
+
+// ----- the rogue -----
+
+/// A second process on the companion's network (here a thread with its own UDP socket):
+/// from 3 s after `mpcc fly` starts, it sends PX4's HEARTBEAT (system 1, component 1,
+/// autopilot PX4) and ODOMETRY for a vehicle 30 m away with a clock 1000 s ahead every
+/// 2 ms for 5 s, then random datagrams (half starting with MAVLink 2's magic byte) every
+/// 2 ms for 5 s, and so on, and counts the datagrams mpcc sends it.
+struct Rogue {
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    thread: std::thread::JoinHandle<RogueSeen>,
+}
+
+/// What the rogue did and got.
+#[derive(Debug)]
+struct RogueSeen {
+    sent: u64,
+    received: u64,
+}
+
+impl Rogue {
+    fn start(port: u16) -> Rogue {
+        use std::sync::atomic::{AtomicBool, Ordering};
+        let stop = std::sync::Arc::new(AtomicBool::new(false));
+        let flag = std::sync::Arc::clone(&stop);
+        let thread = std::thread::spawn(move || {
+            let socket = std::net::UdpSocket::bind("127.0.0.1:0").expect("a UDP socket");
+            socket.set_nonblocking(true).expect("non-blocking");
+            let mut rng = <rand::rngs::StdRng as rand::SeedableRng>::seed_from_u64(35);
+            let mut seen = RogueSeen {
+                sent: 0,
+                received: 0,
+            };
+            let start = Instant::now();
+            let mut buf = [0u8; 2048];
+            while !flag.load(Ordering::Relaxed) {
+                while socket.recv(&mut buf).is_ok() {
+                    seen.received += 1;
+                }
+                let t = start.elapsed().as_secs_f64() - 3.0;
+                if t >= 0.0 {
+                    for d in rogue_datagrams(t, &mut rng) {
+                        if socket.send_to(&d, ("127.0.0.1", port)).is_ok() {
+                            seen.sent += 1;
+                        }
+                    }
+                }
+                std::thread::sleep(Duration::from_millis(2));
+            }
+            seen
+        });
+        Rogue { stop, thread }
+    }
+
+    fn stop(self) -> RogueSeen {
+        self.stop.store(true, std::sync::atomic::Ordering::Relaxed);
+        self.thread.join().expect("the rogue thread")
+    }
+}
+
+/// What the rogue sends at `t` \[s\] into its attack: PX4 look-alikes for 5 s, junk for 5 s.
+fn rogue_datagrams(t: f64, rng: &mut rand::rngs::StdRng) -> Vec<Vec<u8>> {
+    use mavlink::dialects::common::{self as mc, MavMessage};
+    use rand::Rng;
+    if t % 10.0 >= 5.0 {
+        let mut junk: Vec<u8> = (0..rng.random_range(1..300))
+            .map(|_| rng.random())
+            .collect();
+        if rng.random_bool(0.5) {
+            junk[0] = 0xFD;
+        }
+        return vec![junk];
+    }
+    let header = mavlink::MavHeader {
+        system_id: 1,
+        component_id: 1,
+        sequence: 0,
+    };
+    let heartbeat = MavMessage::HEARTBEAT(mc::HEARTBEAT_DATA {
+        mavtype: mc::MavType::MAV_TYPE_QUADROTOR,
+        autopilot: mc::MavAutopilot::MAV_AUTOPILOT_PX4,
+        system_status: mc::MavState::MAV_STATE_ACTIVE,
+        mavlink_version: 3,
+        ..mc::HEARTBEAT_DATA::DEFAULT
+    });
+    let odometry = MavMessage::ODOMETRY(mc::ODOMETRY_DATA {
+        time_usec: ((1000.0 + t) * 1e6) as u64,
+        x: 30.0,
+        z: -2.0,
+        q: [1.0, 0.0, 0.0, 0.0],
+        frame_id: mc::MavFrame::MAV_FRAME_LOCAL_NED,
+        child_frame_id: mc::MavFrame::MAV_FRAME_LOCAL_NED,
+        ..mc::ODOMETRY_DATA::DEFAULT
+    });
+    [heartbeat, odometry]
+        .iter()
+        .map(|m| {
+            let mut out = Vec::new();
+            mavlink::write_v2_msg(&mut out, header, m).expect("a frame");
+            out
+        })
+        .collect()
+}
+
+/// The rogue got no setpoint, its datagrams were all ignored, and the hold never saw its
+/// vehicle 30 m away.
+fn assert_rogue_ignored(seen: &RogueSeen, report: &serde_json::Value) {
+    let link = &report["link"]["trust"];
+    let num = |v: &serde_json::Value| v.as_f64().unwrap_or(f64::NAN);
+    eprintln!("rogue: {seen:?}; mpcc's link: {}", report["link"]);
+    assert!(seen.sent > 1000, "the rogue sent only {seen:?}");
+    assert_eq!(seen.received, 0, "mpcc sent the rogue {seen:?} datagrams");
+    assert_eq!(num(&link["ignored_senders"]), 1.0, "{link}");
+    assert!(
+        num(&link["ignored"]) >= 0.9 * seen.sent as f64,
+        "mpcc ignored {} of {} rogue datagrams: {link}",
+        link["ignored"],
+        seen.sent
+    );
+    assert_eq!(link["relocks"].as_array().map(Vec::len), Some(0), "{link}");
+    let hold = report["summary"]["phases"]
+        .as_array()
+        .and_then(|p| p.iter().find(|p| p["phase"] == "hold"))
+        .unwrap_or_else(|| panic!("no hold phase in {}", report["summary"]));
+    let err = num(&hold["max_tracking_error_m"]);
+    eprintln!("the hold's largest error with the rogue: {err:.3} m");
+    assert!(
+        err < 1.0,
+        "the hold's largest error {err} m (the rogue's vehicle is 30 m away)"
+    );
 }
 
 /// The flight log PX4 wrote in `dir` (`log/<date>/<time>.ulg`; the newest if several).
@@ -420,6 +572,7 @@ const FLIP: Case = Case {
     speed_factor: None,
     params: &[],
     fly_args: &[],
+    rogue: false,
 };
 
 #[test]

@@ -24,8 +24,12 @@
 //! * [`setpoint`]: the body-rate + collective-thrust setpoint PX4 takes, made safe (never
 //!   non-finite, always in range) and mapped to PX4's normalized thrust with the vehicle's
 //!   hover thrust;
-//! * [`transport`]: the link (udpin, udpout, serial) through `mavlink::connect`, with
-//!   non-blocking reads and typed address errors;
+//! * [`transport`]: the link (udpin, udpout, serial), with non-blocking reads and typed
+//!   address errors; on UDP locked onto one peer by [`trust`], and signed by [`signing`]
+//!   when given a key;
+//! * [`trust`]: whom a UDP link listens to (the first PX4 HEARTBEAT's sender, relocked only
+//!   after silence) and the count of everything else;
+//! * [`signing`]: MAVLink 2 message signing: the key file, the check of every frame;
 //! * [`sitl`]: the simulated PX4's commander (PX4's offboard rules: OFFBOARD only while
 //!   setpoints stream, arming checks, the offboard-loss failsafe, PX4's land detector and its
 //!   automatic disarm in any mode, message intervals, TIMESYNC, SIH's parameters);
@@ -43,8 +47,10 @@ pub mod pilot;
 pub mod profile;
 pub mod relay;
 pub mod setpoint;
+pub mod signing;
 pub mod sitl;
 pub mod transport;
+pub mod trust;
 pub mod vehicle;
 pub mod watch;
 

@@ -54,7 +54,7 @@ use crate::link::{Failsafe, LinkConfig, LinkConfigError, Phase, Session};
 use crate::messages::{self, Inbound, LandedState, Px4Mode};
 use crate::profile::{FlipPlan, ProfileError, SIH_PARAMS, VehicleProfile, plan_flip};
 use crate::setpoint::{Px4Setpoint, RateLimits, SetpointError, ThrustMap, make_setpoint};
-use crate::transport::Link;
+use crate::transport::{Link, LinkStats};
 use crate::watch::Watch;
 
 /// LOCAL_POSITION_NED and ATTITUDE_QUATERNION closer than this make one state \[us\].
@@ -500,6 +500,9 @@ pub struct FlightReport {
     pub clock_jumps: u32,
     /// TIMESYNC round trips \[ms\]: the shortest and the longest of the last ones.
     pub round_trip_ms: Option<(f64, f64)>,
+    /// What the link took in and kept out (set by whoever owns the link: the pilot does
+    /// not see it).
+    pub link: Option<LinkStats>,
 }
 
 struct Flight {
@@ -1260,6 +1263,7 @@ impl Pilot {
                 .min()
                 .zip(self.round_trip.bound())
                 .map(|(a, b)| (a * 1e3, b * 1e3)),
+            link: None,
         }
     }
 

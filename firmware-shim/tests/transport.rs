@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 use firmware_shim::messages::{
     self, Command, Px4Mode, command_long, heartbeat, set_attitude_target,
 };
-use firmware_shim::transport::{Address, Link, TransportError};
+use firmware_shim::transport::{Address, Link, LinkOptions, TransportError};
 use mavlink::dialects::common::MavMessage;
 
 mod support;
@@ -73,7 +73,8 @@ fn recv_within(link: &Link, timeout: Duration) -> Option<MavMessage> {
 
 #[test]
 fn udpin_and_udpout_talk_over_loopback_without_blocking() {
-    let (server, port) = support::open_udpin_on_a_free_port();
+    // The listening side as the simulated PX4 (locked onto the first sender).
+    let (server, port) = support::open_udpin_with(&LinkOptions::autopilot(1, 1));
     let client = Link::open(&format!("udpout:127.0.0.1:{port}").parse().unwrap(), 1).unwrap();
     // Nothing waiting: returns at once.
     let t = Instant::now();
@@ -91,7 +92,7 @@ fn udpin_and_udpout_talk_over_loopback_without_blocking() {
             Some(m)
         );
     }
-    // udpin answers the last sender.
+    // udpin answers the sender it locked onto.
     server.send(&heartbeat()).unwrap();
     assert!(matches!(
         recv_within(&client, Duration::from_secs(5)),
