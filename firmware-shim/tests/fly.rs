@@ -1,9 +1,10 @@
 //! The controller loop ([`firmware_shim::pilot`]) flying the generated NMPC through the
 //! simulated PX4 over loopback UDP, in real time: the flip mission end to end, through a
-//! lossy relay (loss, duplication, reordering, jitter), and with an odometry blackout while
-//! inverted (PX4's return mode commanded, the vehicle recovers and lands).
+//! lossy relay (loss, duplication, reordering, jitter), with an odometry blackout while
+//! inverted (PX4's return mode commanded, the vehicle recovers and lands), and a hover on a
+//! signed link whose relay replays 30 % of the frames (every replay refused).
 //!
-//! The three flights run one at a time (25 to 50 s each; each has its own ports): each is a
+//! The flights run one at a time (25 to 50 s each; each has its own ports): each is a
 //! real-time loop of three threads (vehicle, relay, controller), and three at once compete for
 //! the cores with each other and with the rest of a test run. Even so the lossy flight's
 //! lowest point around the flip depends on the machine's timing (1.6 to 1.8 m in quiet runs,
@@ -21,10 +22,11 @@ use firmware_shim::link::{Failsafe, Phase};
 use firmware_shim::messages;
 use firmware_shim::pilot::{self, FlightReport, Pilot, PilotConfig};
 use firmware_shim::relay::{Direction, Relay, RelayConfig, RelayHooks, RelayStats};
-use firmware_shim::transport::Link;
+use firmware_shim::signing::SigningKey;
+use firmware_shim::transport::{Link, LinkOptions, LinkStats};
 use firmware_shim::vehicle::{SimVehicle, VehicleConfig, serve};
 use mavlink::dialects::common::{MavCmd, MavMessage};
-use mpc_sim::mission::MissionConfig;
+use mpc_sim::mission::{MissionConfig, MissionKind};
 use mpc_sim::report::MIN_FLIGHT_ALTITUDE_M;
 
 mod support;
@@ -36,6 +38,8 @@ struct Flown {
     pilot: Pilot,
     vehicle: SimVehicle,
     relay: Option<RelayStats>,
+    /// What the controller's link and the simulated PX4's took in and refused.
+    links: (LinkStats, LinkStats),
 }
 
 /// Flies `cfg` against a simulated PX4 (seed `seed`), through a relay with `faults` and
@@ -44,11 +48,25 @@ struct Flown {
 static ONE_FLIGHT_AT_A_TIME: Mutex<()> = Mutex::new(());
 
 fn fly(cfg: PilotConfig, seed: u64, relay: Option<(RelayConfig, RelayHooks)>) -> Flown {
+    fly_signed(cfg, seed, relay, None)
+}
+
+/// [`fly`] with both ends signing with `key` if given.
+fn fly_signed(
+    cfg: PilotConfig,
+    seed: u64,
+    relay: Option<(RelayConfig, RelayHooks)>,
+    key: Option<SigningKey>,
+) -> Flown {
     // A flight that panicked poisons the lock; the next one may still fly.
     let _flying = ONE_FLIGHT_AT_A_TIME
         .lock()
         .unwrap_or_else(PoisonError::into_inner);
-    let (shim, shim_port) = support::open_udpin_on_a_free_port();
+    let mut shim_options = LinkOptions::companion(messages::PX4_SYSTEM);
+    let mut sitl_options = LinkOptions::autopilot(messages::PX4_SYSTEM, messages::PX4_COMPONENT);
+    shim_options.signing.clone_from(&key);
+    sitl_options.signing = key;
+    let (shim, shim_port) = support::open_udpin_with(&shim_options);
     let shim_addr: SocketAddr = format!("127.0.0.1:{shim_port}").parse().unwrap();
     let relay = relay.map(|(c, h)| {
         Relay::start_with_hooks("127.0.0.1:0".parse().unwrap(), shim_addr, c, h).unwrap()
@@ -60,10 +78,9 @@ fn fly(cfg: PilotConfig, seed: u64, relay: Option<(RelayConfig, RelayHooks)>) ->
         ..VehicleConfig::default()
     });
     let mut pilot = Pilot::new(cfg).unwrap();
-    let sitl_link = Link::open_as(
+    let sitl_link = Link::open_with(
         &format!("udpout:{vehicle_target}").parse().unwrap(),
-        messages::PX4_SYSTEM,
-        messages::PX4_COMPONENT,
+        &sitl_options,
     )
     .unwrap();
     let vehicle = std::thread::scope(|s| {
@@ -86,6 +103,7 @@ fn fly(cfg: PilotConfig, seed: u64, relay: Option<(RelayConfig, RelayHooks)>) ->
         pilot,
         vehicle,
         relay: relay.map(Relay::stop),
+        links: (shim.stats(), sitl_link.stats()),
     }
 }
 
@@ -194,6 +212,48 @@ fn the_flip_mission_survives_loss_duplication_reordering_and_jitter() {
     }
     // Overtaken and duplicated states were seen and dropped, not flown on.
     assert!(f.pilot.report().states_dropped > 0);
+}
+
+#[test]
+fn a_signed_link_refuses_every_replayed_frame_and_still_flies() {
+    // The relay sends 30 % of the datagrams twice, in order: each copy is a replay of a
+    // signed frame, to be refused by the other end's timestamp check (MAVLink 2 signing).
+    let faults = RelayConfig {
+        loss: 0.0,
+        duplicate: 0.3,
+        jitter_ms: (0.0, 0.0),
+        seed: 35,
+    };
+    let mut mission = MissionConfig::for_kind(MissionKind::Hover);
+    mission.hover_time = 2.0;
+    let key = SigningKey::new(*b"mpcc fly tests: a 32-byte key..!");
+    let f = fly_signed(
+        PilotConfig::new(mission),
+        2,
+        Some((faults, RelayHooks::new())),
+        Some(key),
+    );
+    let report = show("signed", &f);
+    let summary = report.summary.as_ref().expect("the mission started");
+    assert!(summary.success, "{:?}", summary.failures);
+    assert!(report.failsafes.is_empty(), "{:?}", report.failsafes);
+    let relay = f.relay.as_ref().unwrap();
+    let (shim, sitl) = &f.links;
+    eprintln!("[signed] the controller's link {shim:?}\n[signed] the simulated PX4's {sitl:?}");
+    for (link, d) in [
+        (shim, Direction::VehicleToCompanion),
+        (sitl, Direction::CompanionToVehicle),
+    ] {
+        let copies = relay.direction(d).duplicated;
+        assert!(link.signing && copies > 100, "{d}: {copies} copies");
+        assert_eq!(
+            link.replayed, copies,
+            "{d}: every copy refused, nothing else: {link:?}"
+        );
+        assert_eq!((link.unsigned, link.bad_signature), (0, 0), "{d}: {link:?}");
+    }
+    // The copies never reached the controller as duplicate states.
+    assert_eq!(report.states_dropped, 0);
 }
 
 /// Whether an ODOMETRY shows the vehicle upside down (body z up).

@@ -1,4 +1,6 @@
-//! Shared by the loopback tests: a listening link on a free port.
+//! Shared by the loopback tests: a listening link on a free port. (Each test crate uses
+//! some of it.)
+#![allow(dead_code)]
 
 use firmware_shim::transport::{Link, LinkOptions};
 
