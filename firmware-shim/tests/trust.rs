@@ -183,6 +183,21 @@ fn an_expected_system_or_a_fixed_address_narrows_the_lock() {
     p.send(&buf).unwrap();
     assert_eq!(drain(&link, Duration::from_millis(50)).len(), 1);
 
+    // A udpin link given the autopilot's address (`mpcc fly --autopilot`) takes only it,
+    // even when another sends a PX4 HEARTBEAT first.
+    let px4 = peer();
+    let mut opts = LinkOptions::companion(1);
+    opts.trust = Trust::Fixed(px4.local_addr().unwrap());
+    let (fixed, port) = support::open_udpin_with(&opts);
+    p.send_to(&frame(&px4_heartbeat(), None), ("127.0.0.1", port))
+        .unwrap();
+    px4.send_to(&frame(&odometry(4.0, 1), None), ("127.0.0.1", port))
+        .unwrap();
+    let got = drain(&fixed, Duration::from_millis(50));
+    assert_eq!(got.iter().filter_map(x_of).collect::<Vec<_>>(), [4.0]);
+    assert_eq!(got.len(), 1);
+    assert_eq!(fixed.stats().trust.ignored, 1);
+
     // A udpout link takes only its destination.
     let dest = peer();
     let stranger = peer();
