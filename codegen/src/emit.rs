@@ -314,19 +314,122 @@ fn condensing_storage(l: &Lowered, opts: &Options) -> usize {
     }
 }
 
-/// `NBX` (the states with a bound, as the runtime sees them: below `Real::INF` in
-/// magnitude) and `NR` of the generated solver: `0` when it condenses (`nc = N`) and nothing
-/// but control bounds could stop it, `N` otherwise.
-fn bound_rows_and_riccati(l: &Lowered, nc: usize) -> (usize, usize) {
+/// `NBX` of the generated solver: the states with a bound, as the runtime sees them (below
+/// `Real::INF` in magnitude).
+pub(crate) fn state_bound_rows(l: &Lowered) -> usize {
     let inf = <f64 as mpc_runtime::Real>::INF;
-    let nbx = l
-        .lbx
+    l.lbx
         .iter()
         .zip(&l.ubx)
         .filter(|&(&lo, &hi)| lo > -inf || hi < inf)
-        .count();
+        .count()
+}
+
+/// `NBX` ([`state_bound_rows`]) and `NR` of the generated solver: `NR` is `0` when it
+/// condenses (`nc = N`) and nothing but control bounds could stop it, `N` otherwise.
+fn bound_rows_and_riccati(l: &Lowered, nc: usize) -> (usize, usize) {
+    let nbx = state_bound_rows(l);
     let dense_only = nc == l.n && nbx == 0 && l.ng == 0 && l.ngn == 0;
     (nbx, if dense_only { 0 } else { l.n })
+}
+
+/// The `Solver`'s run-time bounds: setters and getters for the control and model-state box
+/// bounds and the general constraints' stage and terminal rows. A setter goes through
+/// `Rti::set_bounds` / `Rti::set_constraint_bounds` with the other bounds as they are, so it
+/// checks everything before it changes anything.
+fn bounds_api() -> TokenStream {
+    let takes_effect = "It applies from the next [`prepare`](Self::prepare) or \
+        [`solve_sqp`](Self::solve_sqp): a [`feedback`](Self::feedback) solves the QP of the \
+        last preparation, with the bounds it had.";
+    let errors = "`Real::INFINITY` (`-Real::INFINITY` below) means unbounded.\n\n# Errors\n\
+        [`SetError::NonFinite`] for NaN, a lower bound `+inf` or an upper bound `-inf`; \
+        [`SetError::CrossedBounds`] if a lower bound exceeds its upper bound";
+    let nothing = "Nothing changes on error.";
+    let doc = |what: &str, extra: &str| {
+        doc_lines(&format!(
+            "{what} {takes_effect}\n\n{errors}{extra}. {nothing}"
+        ))
+    };
+    let set_u = doc(
+        "Sets the control bounds `lb <= u_k <= ub` of every stage `k < N`.",
+        "",
+    );
+    let set_x = doc(
+        "Sets the bounds `lb <= x_k <= ub` of the model states at stages `1..=N` (the \
+         measured `x_0` is not bounded); the states an input-rate cost appends keep theirs.",
+        ";\n[`SetError::TooManyStateBounds`] if more states would have a bound (either side \
+         finite) than the solver has state-bound rows, [`NBX`] (the states the model file \
+         bounds: none for a model without state bounds)",
+    );
+    let set_g = doc(
+        "Sets the bounds `lg <= h(x_k, u_k, p_k) <= ug` of the general constraints at every \
+         stage `k < N` (soft rows keep their penalties).",
+        "",
+    );
+    let set_gn = doc(
+        "Sets the bounds `lgn <= h_N(x_N, p_N) <= ugn` of the terminal constraints (soft rows \
+         keep their penalties).",
+        "",
+    );
+    quote! {
+        #set_u
+        pub fn set_control_bounds(&mut self, lb: &[Real; NU], ub: &[Real; NU]) -> Result<(), SetError> {
+            let (lbx, ubx, _, _) = self.rti.bounds();
+            let (lbx, ubx) = (*lbx, *ubx);
+            self.rti.set_bounds(&lbx, &ubx, &SVector::from(*lb), &SVector::from(*ub))
+        }
+
+        /// The control bounds in use, `(lb, ub)` (infinite where unbounded).
+        pub fn control_bounds(&self) -> ([Real; NU], [Real; NU]) {
+            let (_, _, lbu, ubu) = self.rti.bounds();
+            ((*lbu).into(), (*ubu).into())
+        }
+
+        #set_x
+        pub fn set_state_bounds(&mut self, lb: &[Real; NX_MODEL], ub: &[Real; NX_MODEL]) -> Result<(), SetError> {
+            let (lbx, ubx, lbu, ubu) = self.rti.bounds();
+            let model = |new: &[Real; NX_MODEL], old: &SVector<Real, NX>| {
+                SVector::<Real, NX>::from_fn(|i, _| new.get(i).copied().unwrap_or(old[i]))
+            };
+            let (lbx, ubx, lbu, ubu) = (model(lb, lbx), model(ub, ubx), *lbu, *ubu);
+            self.rti.set_bounds(&lbx, &ubx, &lbu, &ubu)
+        }
+
+        /// The model-state bounds in use, `(lb, ub)` (infinite where unbounded).
+        pub fn state_bounds(&self) -> ([Real; NX_MODEL], [Real; NX_MODEL]) {
+            let (lbx, ubx, _, _) = self.rti.bounds();
+            (
+                core::array::from_fn(|i| lbx[i]),
+                core::array::from_fn(|i| ubx[i]),
+            )
+        }
+
+        #set_g
+        pub fn set_constraint_bounds(&mut self, lg: &[Real; NG], ug: &[Real; NG]) -> Result<(), SetError> {
+            let (_, _, lgn, ugn) = self.rti.constraint_bounds();
+            let (lgn, ugn) = (*lgn, *ugn);
+            self.rti.set_constraint_bounds(&SVector::from(*lg), &SVector::from(*ug), &lgn, &ugn)
+        }
+
+        /// The stage constraint bounds in use, `(lg, ug)` (infinite where unbounded).
+        pub fn constraint_bounds(&self) -> ([Real; NG], [Real; NG]) {
+            let (lg, ug, _, _) = self.rti.constraint_bounds();
+            ((*lg).into(), (*ug).into())
+        }
+
+        #set_gn
+        pub fn set_terminal_constraint_bounds(&mut self, lgn: &[Real; NGN], ugn: &[Real; NGN]) -> Result<(), SetError> {
+            let (lg, ug, _, _) = self.rti.constraint_bounds();
+            let (lg, ug) = (*lg, *ug);
+            self.rti.set_constraint_bounds(&lg, &ug, &SVector::from(*lgn), &SVector::from(*ugn))
+        }
+
+        /// The terminal constraint bounds in use, `(lgn, ugn)` (infinite where unbounded).
+        pub fn terminal_constraint_bounds(&self) -> ([Real; NGN], [Real; NGN]) {
+            let (_, _, lgn, ugn) = self.rti.constraint_bounds();
+            ((*lgn).into(), (*ugn).into())
+        }
+    }
 }
 
 /// Upper-case constant name for a model name.
@@ -800,6 +903,7 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
         None => (quote!(), quote!(), quote!()),
     };
     let helpers_mod = quote!(#(#helpers)*);
+    let bounds = bounds_api();
     let settings = {
         let mut fields = Vec::new();
         if let Some(m) = opts.qp.max_iter {
@@ -860,7 +964,9 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
          iteration per control step.\n\n\
          Each step: [`prepare`](Self::prepare) (before the state arrives), \
          [`set_x0`](Self::set_x0), [`feedback`](Self::feedback), then apply \
-         [`u0`](Self::u0). Parameters have named setters; [`solve_sqp`](Self::solve_sqp) \
+         [`u0`](Self::u0). Parameters have named setters, and the bounds run-time setters \
+         ([`set_control_bounds`](Self::set_control_bounds) and its kin); \
+         [`solve_sqp`](Self::solve_sqp) \
          iterates to convergence for offline use. No heap, no panics: it can live in a \
          `static` ([`unconfigured`](Self::unconfigured) is `const`, then \
          [`configure`](Self::configure)).",
@@ -1223,6 +1329,8 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
 
             #(#setters)*
 
+            #bounds
+
             /// Sets the trajectory guess: `x` at every stage, `u` at every stage.
             ///
             /// # Errors
@@ -1308,6 +1416,65 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
     }
 }
 
+/// The C ABI's bound setters and getters (`<prefix>_set_control_bounds`,
+/// `<prefix>_get_control_bounds` and the same for the state, constraint and terminal
+/// constraint bounds), each a pair over the `Solver` methods of [`bounds_api`]. NULL is
+/// refused unless the bounds have no entries (a model without general constraints).
+fn ffi_bounds_api(pre: &str, l: &Lowered) -> TokenStream {
+    let kinds = [
+        ("control", quote!(NU), l.nu),
+        ("state", quote!(NX_MODEL), l.nx_model),
+        ("constraint", quote!(NG), l.ng),
+        ("terminal_constraint", quote!(NGN), l.ngn),
+    ];
+    let fns = kinds.into_iter().map(|(kind, len, entries)| {
+        let (set_c, get_c) = (
+            format_ident!("{pre}_set_{kind}_bounds"),
+            format_ident!("{pre}_get_{kind}_bounds"),
+        );
+        let (set, get) = (
+            format_ident!("set_{kind}_bounds"),
+            format_ident!("{kind}_bounds"),
+        );
+        let null = if entries > 0 {
+            quote! {
+                if lb.is_null() || ub.is_null() {
+                    return ERR_NULL;
+                }
+            }
+        } else {
+            quote!()
+        };
+        quote! {
+            /// C: see the header.
+            ///
+            /// # Safety
+            /// `s` from `create`; `lb` and `ub` point to the bounds' entries.
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn #set_c(s: *mut Solver, lb: *const Real, ub: *const Real) -> c_int {
+                let Some(s) = (unsafe { s.as_mut() }) else { return ERR_NULL };
+                #null
+                code(s.#set(&read::<#len>(lb), &read::<#len>(ub)))
+            }
+
+            /// C: see the header.
+            ///
+            /// # Safety
+            /// `s` from `create`; `lb` and `ub` have room for the bounds' entries.
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn #get_c(s: *const Solver, lb: *mut Real, ub: *mut Real) -> c_int {
+                let Some(s) = (unsafe { s.as_ref() }) else { return ERR_NULL };
+                #null
+                let (l, h) = s.#get();
+                write(lb, &l);
+                write(ub, &h);
+                0
+            }
+        }
+    });
+    quote!(#(#fns)*)
+}
+
 /// The C ABI module.
 pub(crate) fn ffi(l: &Lowered, opts: &Options) -> TokenStream {
     let pre = opts.crate_name(&l.name);
@@ -1327,6 +1494,7 @@ pub(crate) fn ffi(l: &Lowered, opts: &Options) -> TokenStream {
         f("get_stats"),
         f("set_qp_max_iter"),
     );
+    let bounds = ffi_bounds_api(&pre, l);
     let mut named = Vec::new();
     for v in &l.params {
         let cfn = f(&format!("set_{}", v.name));
@@ -1543,6 +1711,8 @@ pub(crate) fn ffi(l: &Lowered, opts: &Options) -> TokenStream {
                 }
                 code(s.set_guess(&read::<NX_MODEL>(x), &read::<NU>(u)))
             }
+
+            #bounds
 
             /// Sets the QP iteration limit (bounds the worst-case feedback time).
             ///

@@ -298,6 +298,9 @@ fn header(l: &Lowered, name: &str, stamp: &str, opts: &Options) -> Result<String
     c.insert("nx_model", &l.nx_model);
     c.insert("nu", &l.nu);
     c.insert("np", &l.np);
+    c.insert("ng", &l.ng);
+    c.insert("ngn", &l.ngn);
+    c.insert("nbx", &emit::state_bound_rows(l));
     let vals = |v: &[lower::Named]| tera::Value::Array(v.iter().map(var_value).collect());
     c.insert("states", &vals(&l.states));
     c.insert("controls", &vals(&l.controls));

@@ -907,3 +907,217 @@ fn quadrotor_probe_functions_constraint_and_closed_loop() {
         "position error up to {worst_settled} m after step {SETTLED}"
     );
 }
+
+/// QR-bench B at hover with the reference `dz` above: converged by the full SQP from the
+/// hover guess.
+fn qrbench_climb(s: &mut quadrotor_rates::Solver, dz: f64) -> quadrotor_rates::RtiInfo<f64> {
+    let x0 = [0.0, 0.0, 2.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+    let mut xref = x0;
+    xref[2] += dz;
+    s.set_xref_all(&xref).unwrap();
+    s.set_guess(&x0, &[9.81, 0.0, 0.0, 0.0]).unwrap();
+    s.set_x0(&x0).unwrap();
+    s.solve_sqp()
+}
+
+/// Run-time control bounds on QR-bench B: a hover reference 5 m above makes the converged
+/// plan want more than 12 m/s^2 of thrust at once; with `c <= 12` set at run time, the first
+/// control's thrust is 12 and no stage's exceeds it. The getters return what was set.
+#[test]
+fn control_bounds_set_at_run_time_bound_the_plan() {
+    use quadrotor_rates as m;
+    let c = m::CONTROL_C.start;
+    let mut free = Box::new(m::Solver::new());
+    assert_eq!(free.control_bounds(), (m::LBU, m::UBU));
+    let info = qrbench_climb(&mut free, 5.0);
+    assert_eq!(info.status, m::RtiStatus::Ok, "{info:?}");
+    assert!(free.u0()[c] > 12.0, "unbounded u0: {:?}", free.u0());
+
+    let mut bounded = Box::new(m::Solver::new());
+    let mut ub = m::UBU;
+    ub[c] = 12.0;
+    bounded.set_control_bounds(&m::LBU, &ub).unwrap();
+    assert_eq!(bounded.control_bounds(), (m::LBU, ub));
+    let info = qrbench_climb(&mut bounded, 5.0);
+    assert_eq!(info.status, m::RtiStatus::Ok, "{info:?}");
+    let u0 = bounded.u0();
+    assert!((u0[c] - 12.0).abs() <= 1e-6, "bounded u0: {u0:?}");
+    for k in 0..m::N {
+        let u = bounded.control(k).unwrap();
+        assert!(u[c] <= 12.0 + 1e-6, "stage {k}: {u:?}");
+    }
+    // Unbounded again (infinite bounds): the plan is the free one.
+    let lb = [-m::Real::INFINITY; m::NU];
+    bounded
+        .set_control_bounds(&lb, &[m::Real::INFINITY; m::NU])
+        .unwrap();
+    qrbench_climb(&mut bounded, 5.0);
+    assert!(
+        bounded.u0()[c] > 12.0,
+        "unbounded again: {:?}",
+        bounded.u0()
+    );
+}
+
+/// The bound setters refuse NaN, a lower bound `+inf` (an upper bound `-inf`), crossed
+/// bounds and, on QR-bench (no state-bound rows: `NBX = 0`), any state bound, each with its
+/// error and without changing the bounds in use.
+#[test]
+fn bound_setters_refuse_bad_bounds_and_change_nothing() {
+    use m::SetError::{CrossedBounds, NonFinite, TooManyStateBounds};
+    use quadrotor_rates as m;
+    let mut s = Box::new(m::Solver::new());
+    let mut ub = m::UBU;
+    ub[0] = 12.0;
+    s.set_control_bounds(&m::LBU, &ub).unwrap();
+    let (u_before, x_before) = (s.control_bounds(), s.state_bounds());
+    assert_eq!(
+        x_before,
+        ([-f64::INFINITY; m::NX_MODEL], [f64::INFINITY; m::NX_MODEL])
+    );
+    let with = |v: [f64; m::NU], i: usize, e: f64| {
+        let mut v = v;
+        v[i] = e;
+        v
+    };
+    let refusals = [
+        (with(m::LBU, 1, f64::NAN), ub, NonFinite),
+        (m::LBU, with(ub, 3, f64::NAN), NonFinite),
+        (
+            with(m::LBU, 0, f64::INFINITY),
+            with(ub, 0, f64::INFINITY),
+            NonFinite,
+        ),
+        (
+            with(m::LBU, 0, -f64::INFINITY),
+            with(ub, 0, -f64::INFINITY),
+            NonFinite,
+        ),
+        (with(m::LBU, 0, 13.0), ub, CrossedBounds),
+    ];
+    for (lb, ub, err) in refusals {
+        assert_eq!(s.set_control_bounds(&lb, &ub), Err(err), "{lb:?} {ub:?}");
+        assert_eq!((s.control_bounds(), s.state_bounds()), (u_before, x_before));
+    }
+    assert_eq!(m::NBX, 0);
+    let (lbx, mut ubx) = x_before;
+    ubx[m::STATE_P.start + 2] = 4.0;
+    assert_eq!(s.set_state_bounds(&lbx, &ubx), Err(TooManyStateBounds));
+    let mut nan = lbx;
+    nan[0] = f64::NAN;
+    assert_eq!(s.set_state_bounds(&nan, &x_before.1), Err(NonFinite));
+    assert_eq!((s.control_bounds(), s.state_bounds()), (u_before, x_before));
+    // No general constraints: their setters take (and their getters give) empty arrays.
+    assert_eq!((m::NG, m::NGN), (0, 0));
+    assert_eq!(s.set_constraint_bounds(&[], &[]), Ok(()));
+    assert_eq!(s.set_terminal_constraint_bounds(&[], &[]), Ok(()));
+    assert_eq!(s.constraint_bounds(), ([], []));
+}
+
+/// A state bound set at run time on the point mass (3 state-bound rows, its accelerations):
+/// the z acceleration's row given to the height, `z <= 0.2` holds along the converged plan
+/// from a climb at 1 m/s toward a reference 1 m up, which the unbounded plan passes. The
+/// input-rate states appended to the model's keep their (absent) bounds; a fourth bounded
+/// state is refused.
+#[test]
+fn state_bounds_set_at_run_time_bound_the_plan() {
+    use paper_pointmass as m;
+    const Z: usize = 2;
+    let plan_top = |s: &mut m::Solver| {
+        let mut xref = [0.0; m::NX_MODEL];
+        xref[Z] = 1.0;
+        s.set_xref_all(&xref).unwrap();
+        let mut x0 = [0.0; m::NX_MODEL];
+        x0[m::STATE_VEL.start + 2] = 1.0;
+        s.set_x0(&x0).unwrap();
+        let info = s.solve_sqp();
+        assert_eq!(info.status, m::RtiStatus::Ok, "{info:?}");
+        (1..=m::N)
+            .map(|k| s.state(k).unwrap()[Z])
+            .fold(f64::MIN, f64::max)
+    };
+    let mut free = Box::new(m::Solver::new());
+    let (lbx, ubx) = free.state_bounds();
+    let free_top = plan_top(&mut free);
+    assert!(free_top > 0.25, "unbounded plan's highest z: {free_top}");
+
+    let mut s = Box::new(m::Solver::new());
+    let (mut lb, mut ub) = (lbx, ubx);
+    let az = m::STATE_ACC.start + 2;
+    (lb[az], ub[az]) = (-f64::INFINITY, f64::INFINITY);
+    ub[Z] = 0.2;
+    s.set_state_bounds(&lb, &ub).unwrap();
+    assert_eq!(s.state_bounds(), (lb, ub));
+    let (all_lbx, all_ubx, _, _) = s.rti().bounds();
+    for i in m::NX_MODEL..m::NX {
+        assert_eq!(
+            (all_lbx[i], all_ubx[i]),
+            (m::LBX[i], m::UBX[i]),
+            "state {i}"
+        );
+    }
+    let top = plan_top(&mut s);
+    assert!(top <= 0.2 + 1e-6, "bounded plan's highest z: {top}");
+    assert!(top > 0.2 - 1e-3, "the bound is active: {top}");
+
+    let mut four = lbx;
+    four[Z] = -1.0;
+    assert_eq!(
+        s.set_state_bounds(&four, &ubx),
+        Err(m::SetError::TooManyStateBounds)
+    );
+    assert_eq!(s.state_bounds(), (lb, ub));
+}
+
+/// The probe's two soft constraint rows: their bounds read back as the model file's, a new
+/// pair is taken and read back, NaN and crossed pairs are refused and change nothing; the
+/// probe has no terminal rows.
+#[test]
+fn constraint_bounds_set_at_run_time_are_kept() {
+    use quadrotor_probe as m;
+    let mut s = Box::new(m::Solver::new());
+    assert_eq!(s.constraint_bounds(), (m::LG, m::UG));
+    let (lg, ug) = ([-0.5, -0.25], [0.5, f64::INFINITY]);
+    s.set_constraint_bounds(&lg, &ug).unwrap();
+    assert_eq!(s.constraint_bounds(), (lg, ug));
+    assert_eq!(
+        s.set_constraint_bounds(&[f64::NAN, 0.0], &ug),
+        Err(m::SetError::NonFinite)
+    );
+    assert_eq!(
+        s.set_constraint_bounds(&[0.6, 0.0], &ug),
+        Err(m::SetError::CrossedBounds)
+    );
+    assert_eq!(s.constraint_bounds(), (lg, ug));
+    assert_eq!(s.terminal_constraint_bounds(), ([], []));
+    assert_eq!(s.set_terminal_constraint_bounds(&[], &[]), Ok(()));
+}
+
+/// The f32 solver that condenses (QR-bench A) takes run-time control bounds too: one
+/// real-time iteration toward a reference 5 m above asks for more than 12 m/s^2 of thrust,
+/// and exactly 12 (to f32 accuracy) once `c <= 12` is set.
+#[test]
+fn control_bounds_set_at_run_time_bound_the_condensed_f32_solver() {
+    use quadrotor_rates_f32 as m;
+    let climb = |s: &mut m::Solver| {
+        let x0 = [0.0, 0.0, 2.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+        let mut xref = x0;
+        xref[2] += 5.0;
+        s.set_xref_all(&xref).unwrap();
+        s.set_guess(&x0, &[9.81, 0.0, 0.0, 0.0]).unwrap();
+        s.prepare();
+        assert!(s.rti().condensed());
+        s.set_x0(&x0).unwrap();
+        assert_eq!(s.feedback().status, m::RtiStatus::Ok);
+        s.u0()[m::CONTROL_C.start]
+    };
+    let free = climb(&mut m::Solver::new());
+    assert!(free > 12.5, "unbounded thrust {free}");
+    let mut s = Box::new(m::Solver::new());
+    let mut ub = m::UBU;
+    ub[m::CONTROL_C.start] = 12.0;
+    s.set_control_bounds(&m::LBU, &ub).unwrap();
+    assert_eq!(s.control_bounds(), (m::LBU, ub));
+    let c = climb(&mut s);
+    assert!((c - 12.0).abs() <= 1e-4, "bounded thrust {c}");
+}

@@ -161,7 +161,9 @@ impl<T: Real> RtiInfo<T> {
 /// Why a setter refused its input.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum SetError {
-    /// A value was NaN or infinite (infinite bounds are allowed).
+    /// A value was NaN or infinite. A bound may be infinite on the side it relaxes (a lower
+    /// bound `-inf`, an upper bound `+inf`); NaN and a lower bound `+inf` or an upper bound
+    /// `-inf` (which nothing satisfies) are refused.
     NonFinite,
     /// The stage index is beyond the horizon.
     StageOutOfRange,
@@ -262,8 +264,13 @@ fn not_crossed<T: Real, const R: usize>(lo: &SVector<T, R>, hi: &SVector<T, R>) 
     lo.iter().zip(hi.iter()).all(|(l, h)| l <= h)
 }
 
-/// Two pairs of bounds: NaN anywhere is `NonFinite` (checked first), a lower bound above its
-/// upper bound is `CrossedBounds`.
+/// Whether no lower bound is `+inf` and no upper bound `-inf`.
+fn relaxing_infinities<T: Real, const R: usize>(lo: &SVector<T, R>, hi: &SVector<T, R>) -> bool {
+    lo.iter().all(|&l| l.finite() || l < T::ZERO) && hi.iter().all(|&h| h.finite() || h > T::ZERO)
+}
+
+/// Two pairs of bounds: NaN anywhere, or an infinity on the side it does not relax, is
+/// `NonFinite` (checked first), a lower bound above its upper bound is `CrossedBounds`.
 fn check_bounds<T: Real, const A: usize, const B: usize>(
     la: &SVector<T, A>,
     ua: &SVector<T, A>,
@@ -271,6 +278,9 @@ fn check_bounds<T: Real, const A: usize, const B: usize>(
     ub: &SVector<T, B>,
 ) -> Result<(), SetError> {
     if !(no_nan(la) && no_nan(ua) && no_nan(lb) && no_nan(ub)) {
+        return Err(SetError::NonFinite);
+    }
+    if !(relaxing_infinities(la, ua) && relaxing_infinities(lb, ub)) {
         return Err(SetError::NonFinite);
     }
     if !(not_crossed(la, ua) && not_crossed(lb, ub)) {
@@ -533,8 +543,9 @@ impl<
     /// states may have a bound (one side or both).
     ///
     /// # Errors
-    /// [`SetError::NonFinite`] for NaN, [`SetError::CrossedBounds`],
-    /// [`SetError::TooManyStateBounds`] (checked in that order). Nothing changes on error.
+    /// [`SetError::NonFinite`] for NaN (or a lower bound `+inf`, an upper bound `-inf`),
+    /// [`SetError::CrossedBounds`], [`SetError::TooManyStateBounds`] (checked in that order).
+    /// Nothing changes on error.
     pub fn set_bounds(
         &mut self,
         lbx: &SVector<T, NX>,
@@ -558,10 +569,39 @@ impl<
         Ok(())
     }
 
+    /// The box bounds in use, `(lbx, ubx, lbu, ubu)`, as [`set_bounds`](Self::set_bounds)
+    /// last accepted them (zero for an [`unconfigured`](Self::unconfigured) solver,
+    /// `-INF` and `INF`, no bounds, for [`new`](Self::new)'s).
+    pub fn bounds(
+        &self,
+    ) -> (
+        &SVector<T, NX>,
+        &SVector<T, NX>,
+        &SVector<T, NU>,
+        &SVector<T, NU>,
+    ) {
+        (&self.lbx, &self.ubx, &self.lbu, &self.ubu)
+    }
+
+    /// The bounds of the general constraints in use, `(lg, ug, lgn, ugn)` (stage, then
+    /// terminal rows), as [`set_constraint_bounds`](Self::set_constraint_bounds) last
+    /// accepted them.
+    pub fn constraint_bounds(
+        &self,
+    ) -> (
+        &SVector<T, NG>,
+        &SVector<T, NG>,
+        &SVector<T, NGN>,
+        &SVector<T, NGN>,
+    ) {
+        (&self.lg, &self.ug, &self.lgn, &self.ugn)
+    }
+
     /// Sets the bounds of the general constraints (stage and terminal).
     ///
     /// # Errors
-    /// [`SetError::NonFinite`] for NaN, [`SetError::CrossedBounds`].
+    /// [`SetError::NonFinite`] for NaN (or a lower bound `+inf`, an upper bound `-inf`),
+    /// [`SetError::CrossedBounds`] (checked in that order). Nothing changes on error.
     pub fn set_constraint_bounds(
         &mut self,
         lg: &SVector<T, NG>,

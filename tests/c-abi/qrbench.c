@@ -5,7 +5,8 @@
  * 100 real-time iterations (prepare, set_x0, feedback, get_u0) drive a plant written here in
  * C: the quadrotor ODE of runtime/tests/support/quadrotor.rs, 10 RK4 substeps per 0.05 s,
  * with the operations in the same order as the Rust plant so both loops agree to rounding.
- * Also exercises the error paths (NULL, size, alignment, non-finite input, stage range).
+ * Also exercises the error paths (NULL, size, alignment, non-finite input, stage range) and
+ * the run-time bounds (a thrust limit set through the ABI bounds the control returned).
  *
  * stdout: one line, the final state as 10 numbers printed with %.17g.
  * stderr: a message for every failed check; the exit status is then 1.
@@ -144,6 +145,32 @@ static void check_null_pointers(quadrotor_rates_solver *s) {
     EXPECT_RC(quadrotor_rates_get_state(s, 0, NULL), QUADROTOR_RATES_ERR_NULL);
     EXPECT_RC(quadrotor_rates_get_stats(NULL, &st), QUADROTOR_RATES_ERR_NULL);
     EXPECT_RC(quadrotor_rates_get_stats(s, NULL), QUADROTOR_RATES_ERR_NULL);
+    EXPECT_RC(quadrotor_rates_set_control_bounds(NULL, u, u), QUADROTOR_RATES_ERR_NULL);
+    EXPECT_RC(quadrotor_rates_set_control_bounds(s, NULL, u), QUADROTOR_RATES_ERR_NULL);
+    EXPECT_RC(quadrotor_rates_set_control_bounds(s, u, NULL), QUADROTOR_RATES_ERR_NULL);
+    EXPECT_RC(quadrotor_rates_get_control_bounds(NULL, u, u), QUADROTOR_RATES_ERR_NULL);
+    EXPECT_RC(quadrotor_rates_get_control_bounds(s, NULL, u), QUADROTOR_RATES_ERR_NULL);
+    EXPECT_RC(quadrotor_rates_get_control_bounds(s, u, NULL), QUADROTOR_RATES_ERR_NULL);
+    EXPECT_RC(quadrotor_rates_set_state_bounds(NULL, x, x), QUADROTOR_RATES_ERR_NULL);
+    EXPECT_RC(quadrotor_rates_set_state_bounds(s, NULL, x), QUADROTOR_RATES_ERR_NULL);
+    EXPECT_RC(quadrotor_rates_set_state_bounds(s, x, NULL), QUADROTOR_RATES_ERR_NULL);
+    EXPECT_RC(quadrotor_rates_get_state_bounds(NULL, x, x), QUADROTOR_RATES_ERR_NULL);
+    EXPECT_RC(quadrotor_rates_get_state_bounds(s, NULL, x), QUADROTOR_RATES_ERR_NULL);
+    EXPECT_RC(quadrotor_rates_get_state_bounds(s, x, NULL), QUADROTOR_RATES_ERR_NULL);
+    /* No general constraints (NG = NGN = 0): their bounds have no entries, NULL is fine. */
+    CHECK(QUADROTOR_RATES_NG == 0 && QUADROTOR_RATES_NGN == 0);
+    EXPECT_RC(quadrotor_rates_set_constraint_bounds(NULL, NULL, NULL), QUADROTOR_RATES_ERR_NULL);
+    EXPECT_RC(quadrotor_rates_get_constraint_bounds(NULL, NULL, NULL), QUADROTOR_RATES_ERR_NULL);
+    EXPECT_RC(quadrotor_rates_set_terminal_constraint_bounds(NULL, NULL, NULL),
+              QUADROTOR_RATES_ERR_NULL);
+    EXPECT_RC(quadrotor_rates_get_terminal_constraint_bounds(NULL, NULL, NULL),
+              QUADROTOR_RATES_ERR_NULL);
+    EXPECT_RC(quadrotor_rates_set_constraint_bounds(s, NULL, NULL), QUADROTOR_RATES_STATUS_OK);
+    EXPECT_RC(quadrotor_rates_get_constraint_bounds(s, NULL, NULL), QUADROTOR_RATES_STATUS_OK);
+    EXPECT_RC(quadrotor_rates_set_terminal_constraint_bounds(s, NULL, NULL),
+              QUADROTOR_RATES_STATUS_OK);
+    EXPECT_RC(quadrotor_rates_get_terminal_constraint_bounds(s, NULL, NULL),
+              QUADROTOR_RATES_STATUS_OK);
 }
 
 /* create refuses NULL, too-small and misaligned memory and leaves *out untouched. */
@@ -252,6 +279,93 @@ static void check_not_prepared(const double x0[NX]) {
     free(mem);
 }
 
+/* Whether the control bounds in use are `lb`, `ub`. */
+static int control_bounds_are(quadrotor_rates_solver *s, const double lb[NU], const double ub[NU]) {
+    double l[NU], u[NU];
+    return quadrotor_rates_get_control_bounds(s, l, u) == 0 && memcmp(l, lb, sizeof l) == 0 &&
+           memcmp(u, ub, sizeof u) == 0;
+}
+
+/* Sets the reference 5 m above the hover at x0 for every stage and solves to convergence
+   from the hover; returns the thrust of the first control. */
+static double climb_thrust(quadrotor_rates_solver *s, const double x0[NX]) {
+    static const double hover[NU] = {GRAVITY, 0.0, 0.0, 0.0};
+    double xref[NX], u[NU] = {0};
+    int k;
+    memcpy(xref, x0, sizeof xref);
+    xref[2] += 5.0;
+    for (k = 0; k <= HORIZON; k++) {
+        EXPECT_RC(quadrotor_rates_set_xref(s, k, xref), QUADROTOR_RATES_STATUS_OK);
+    }
+    EXPECT_RC(quadrotor_rates_set_guess(s, x0, hover), QUADROTOR_RATES_STATUS_OK);
+    EXPECT_RC(quadrotor_rates_set_x0(s, x0), QUADROTOR_RATES_STATUS_OK);
+    EXPECT_RC(quadrotor_rates_solve_sqp(s), QUADROTOR_RATES_STATUS_OK);
+    EXPECT_RC(quadrotor_rates_get_u0(s, u), QUADROTOR_RATES_STATUS_OK);
+    return u[0];
+}
+
+/* A second solver: a thrust limit of 12 set at run time bounds the climb's first control
+   (20 without it), from the next prepare or solve_sqp on; bad bounds are refused with
+   their codes and change nothing. */
+static void check_run_time_bounds(const double x0[NX]) {
+    static const double lb[NU] = {0.0, -20.0, -20.0, -6.0};
+    static const double ub_model[NU] = {20.0, 20.0, 20.0, 6.0};
+    static const double ub[NU] = {12.0, 20.0, 20.0, 6.0};
+    double bad[NU], xl[NX], xu[NX], u[NU];
+    size_t size = 0;
+    void *mem = alloc_solver_memory(&size);
+    quadrotor_rates_solver *s = NULL;
+    int k;
+    if (mem == NULL) {
+        fprintf(stderr, "qrbench.c: out of memory\n");
+        failures++;
+        return;
+    }
+    EXPECT_RC(quadrotor_rates_create(mem, size, &s), QUADROTOR_RATES_STATUS_OK);
+    if (s == NULL) {
+        free(mem);
+        return;
+    }
+    CHECK(control_bounds_are(s, lb, ub_model));
+    CHECK(climb_thrust(s, x0) > 12.0);
+
+    /* Set after the preparation: the feedback solves the QP prepared with the old bounds. */
+    EXPECT_RC(quadrotor_rates_prepare(s), QUADROTOR_RATES_STATUS_OK);
+    EXPECT_RC(quadrotor_rates_set_control_bounds(s, lb, ub), QUADROTOR_RATES_STATUS_OK);
+    CHECK(control_bounds_are(s, lb, ub));
+    EXPECT_RC(quadrotor_rates_feedback(s), QUADROTOR_RATES_STATUS_OK);
+    EXPECT_RC(quadrotor_rates_get_u0(s, u), QUADROTOR_RATES_STATUS_OK);
+    CHECK(u[0] > 12.0);
+    /* The next preparation applies them. */
+    EXPECT_RC(quadrotor_rates_prepare(s), QUADROTOR_RATES_STATUS_OK);
+    EXPECT_RC(quadrotor_rates_feedback(s), QUADROTOR_RATES_STATUS_OK);
+    EXPECT_RC(quadrotor_rates_get_u0(s, u), QUADROTOR_RATES_STATUS_OK);
+    CHECK(u[0] <= 12.0 + 1e-6);
+    CHECK(fabs(climb_thrust(s, x0) - 12.0) <= 1e-6);
+    for (k = 0; k < HORIZON; k++) {
+        EXPECT_RC(quadrotor_rates_get_control(s, k, u), QUADROTOR_RATES_STATUS_OK);
+        CHECK(u[0] <= 12.0 + 1e-6);
+    }
+
+    memcpy(bad, lb, sizeof bad);
+    bad[0] = 13.0;
+    EXPECT_RC(quadrotor_rates_set_control_bounds(s, bad, ub), QUADROTOR_RATES_ERR_BOUNDS);
+    bad[0] = NAN;
+    EXPECT_RC(quadrotor_rates_set_control_bounds(s, bad, ub), QUADROTOR_RATES_ERR_NONFINITE);
+    bad[0] = INFINITY;
+    EXPECT_RC(quadrotor_rates_set_control_bounds(s, bad, ub), QUADROTOR_RATES_ERR_NONFINITE);
+    CHECK(control_bounds_are(s, lb, ub));
+    /* QR-bench bounds no state: the solver has no state-bound row for one. */
+    EXPECT_RC(quadrotor_rates_get_state_bounds(s, xl, xu), QUADROTOR_RATES_STATUS_OK);
+    for (k = 0; k < NX; k++) CHECK(xl[k] == -INFINITY && xu[k] == INFINITY);
+    xu[2] = 4.0;
+    EXPECT_RC(quadrotor_rates_set_state_bounds(s, xl, xu), QUADROTOR_RATES_ERR_INPUT);
+    EXPECT_RC(quadrotor_rates_get_state_bounds(s, xl, xu), QUADROTOR_RATES_STATUS_OK);
+    CHECK(xu[2] == INFINITY);
+    CHECK(control_bounds_are(s, lb, ub));
+    free(mem);
+}
+
 int main(void) {
     static const double x0[NX] = {0.0, 0.0, 2.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
     const double u_zero[NU] = {0.0, 0.0, 0.0, 0.0};
@@ -324,6 +438,7 @@ int main(void) {
     CHECK(st.status == QUADROTOR_RATES_STATUS_OK && st.qp_status == 0);
 
     check_not_prepared(x0);
+    check_run_time_bounds(x0);
     free(mem);
 
     for (i = 0; i < NX; i++) printf(i == 0 ? "%.17g" : " %.17g", x[i]);
