@@ -783,6 +783,14 @@ impl Pilot {
     /// Flies `v`: the flip planned for it, the prediction with its response.
     fn set_vehicle(&mut self, v: VehicleProfile, t: f64) -> Result<(), ProfileError> {
         v.validate()?;
+        // The NMPC's model takes the vehicle's collective thrust as its bound (at take-off).
+        NmpcController::new()
+            .set_thrust_limit(v.max_collective())
+            .map_err(|_| ProfileError::Invalid {
+                name: "collective thrust (4 rotors' most thrust over mass)",
+                value: v.max_collective(),
+                why: "the NMPC's thrust bound must be finite and at least 0",
+            })?;
         let plan = plan_flip(&mut self.cfg.mission, &v, self.cfg.flip_rate)?;
         self.event(t, format!("vehicle: {}", v.describe()));
         if let Some(p) = plan {
@@ -1107,11 +1115,24 @@ impl Pilot {
         // Stale odometry is the session's failsafe (PX4's return mode), not the mission's.
         m.pose_timeout = f64::INFINITY;
         m.land_flare_height = m.land_flare_height.max(FLARE_HEIGHT_M);
+        let mut ctrl = NmpcController::new();
+        let c_max = self.vehicle.as_ref().map(VehicleProfile::max_collective);
+        // Checked when the vehicle was set (`set_vehicle`): this cannot fail; if it did, the
+        // model's own bound is kept and said so, rather than leaving PX4 without setpoints.
+        let bounded = c_max.map(|c| ctrl.set_thrust_limit(c));
+        let what = match bounded {
+            Some(Err(e)) => {
+                format!("NMPC: the vehicle's thrust refused ({e:?}); the model's bound")
+            }
+            Some(Ok(())) => "NMPC: collective thrust bounded by the vehicle's".to_string(),
+            None => "NMPC: collective thrust bounded by the model (no vehicle profile)".to_string(),
+        };
+        self.event(now, format!("{what}, {:.1} m/s^2", ctrl.thrust_limit()));
         self.flight = Some(Flight {
             t0: now,
             home: s.p,
             mission: Mission::new(m),
-            ctrl: NmpcController::new(),
+            ctrl,
             next_outer: now,
             cmd: InnerCommand::default(),
             samples: Vec::new(),

@@ -1454,3 +1454,38 @@ fn the_touchdown_speed_is_the_fastest_descent_of_the_heights() {
     let rest: VecDeque<(f64, f64)> = (0..50).map(|i| (f64::from(i) * 0.01, 0.2)).collect();
     assert_eq!(fastest_descent(&rest, 0.3), 0.0);
 }
+
+#[test]
+fn the_nmpc_takes_the_vehicles_thrust_as_its_bound() {
+    let peak = |ls: &Lockstep| {
+        ls.pilot
+            .samples()
+            .iter()
+            .map(|s| s.thrust_cmd)
+            .fold(0.0, f64::max)
+    };
+    let said = |ls: &Lockstep, what: &str| ls.pilot.events().iter().any(|e| e.what.contains(what));
+    // The design vehicle (thrust to weight 4): bounded at 4 g, and the take-off asks for
+    // more than the weak vehicle below has.
+    let strong = fly_at(hover_config(), VehicleConfig::default(), 1.0, 60.0);
+    assert_flown("strong", &strong);
+    assert!(said(&strong, "bounded by the vehicle's, 39.2 m/s^2"));
+    // A profile with 0.28 of that thrust (thrust to weight 1.1: a hover's margin only).
+    let weak = VehicleProfile {
+        rotor_thrust_max_n: VehicleProfile::design().rotor_thrust_max_n * 0.28,
+        ..VehicleProfile::design()
+    };
+    let c_max = weak.max_collective();
+    assert!(peak(&strong) > c_max + 0.5, "{} vs {c_max}", peak(&strong));
+    let cfg = PilotConfig {
+        vehicle: Some(weak),
+        ..hover_config()
+    };
+    let ls = fly_at(cfg, VehicleConfig::default(), 1.0, 60.0);
+    assert_flown("weak", &ls);
+    assert!(said(
+        &ls,
+        &format!("bounded by the vehicle's, {c_max:.1} m/s^2")
+    ));
+    assert!(peak(&ls) <= c_max + 1e-6, "{} > {c_max}", peak(&ls));
+}

@@ -309,6 +309,26 @@ impl NmpcController {
         }
     }
 
+    /// Bounds the collective thrust `c` by `c_max` \[m/s^2\] (mass-normalized: the vehicle's
+    /// rotors' most thrust over its mass) at every stage, in place of the model's bound.
+    ///
+    /// # Errors
+    /// The solver's [`SetError`](quadrotor_rates::SetError) for a `c_max` that is not
+    /// finite or below the lower bound (0); nothing changes then.
+    pub fn set_thrust_limit(&mut self, c_max: f64) -> Result<(), quadrotor_rates::SetError> {
+        if !c_max.is_finite() {
+            return Err(quadrotor_rates::SetError::NonFinite);
+        }
+        let (lb, mut ub) = self.solver.control_bounds();
+        ub[0] = c_max;
+        self.solver.set_control_bounds(&lb, &ub)
+    }
+
+    /// The collective thrust's upper bound \[m/s^2\].
+    pub fn thrust_limit(&self) -> f64 {
+        self.solver.control_bounds().1[0]
+    }
+
     fn plan_q(&self, k: usize) -> [f64; 4] {
         let k = k.min(quadrotor_rates::N);
         self.solver

@@ -332,3 +332,16 @@ fn invalid_configurations_are_refused_with_the_setting_named() {
         }
     }
 }
+
+#[test]
+fn the_nmpcs_thrust_limit_is_validated_and_kept() {
+    use mpc_sim::controller::NmpcController;
+    let mut c = NmpcController::new();
+    assert_eq!(c.thrust_limit(), 20.0, "the model's bound");
+    c.set_thrust_limit(14.5).unwrap();
+    assert_eq!(c.thrust_limit(), 14.5);
+    for bad in [f64::NAN, f64::INFINITY, -1.0] {
+        assert!(c.set_thrust_limit(bad).is_err(), "{bad}");
+        assert_eq!(c.thrust_limit(), 14.5, "unchanged after {bad}");
+    }
+}
