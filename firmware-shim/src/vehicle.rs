@@ -4,7 +4,8 @@
 //!
 //! * OFFBOARD: the last SET_ATTITUDE_TARGET flies it: FRD rates -> FLU, normalized thrust ->
 //!   collective acceleration with the [`ThrustMap`] (the vehicle's hover thrust), through the
-//!   1 kHz rate loop.
+//!   rate loop (every 1 ms; the stock vehicle's as PX4's on SIH, at 250 Hz on the filtered
+//!   gyro, see [`VehicleConfig::gyro_filter`]).
 //! * POSCTL (hold), AUTO.LAND, AUTO.RTL: a PX4-like position controller (PD on position and
 //!   velocity, tilt limited as MPC_TILTMAX_AIR) gives a thrust vector; the attitude it needs
 //!   (the heading held from the moment the mode began) goes through PX4's quaternion attitude
@@ -49,7 +50,7 @@ use mavlink::dialects::common::{self as mc, MavFrame, MavLandedState, MavMessage
 use mpc_sim::estimator::{Estimate, Estimator, EstimatorConfig};
 use mpc_sim::mission::attitude_from_thrust;
 use mpc_sim::plant::{Contact, Disturbance, Plant, QuadParams, QuadState};
-use mpc_sim::rate_loop::{RateController, RateGains, px4_torque_per_command};
+use mpc_sim::rate_loop::{Airmode, GyroFilter, RateController, RateGains, px4_torque_per_command};
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 
 use crate::frames::{enu_to_ned, flu_to_frd, frd_to_flu, quat_enu_flu_to_ned_frd, quat_to_mavlink};
@@ -169,6 +170,11 @@ pub struct VehicleConfig {
     pub params: QuadParams,
     /// The rate loop's gains.
     pub rate_gains: RateGains,
+    /// The rate loop's mixer: this simulator's airmode, or PX4's default MC_AIRMODE 0.
+    pub airmode: Airmode,
+    /// The gyro as PX4's rate controller sees it, filtered at the gyro's rate, the rate loop
+    /// running on every sample; `None`: the raw gyro every 1 ms step.
+    pub gyro_filter: Option<GyroFilter>,
     /// Angular damping, a torque of `-angular_damping * w` (SIH_KDW) [N m s/rad].
     pub angular_damping: f64,
     /// What PX4 answers for MPC_THR_HOVER (and its land detector uses); `None`: the true
@@ -207,8 +213,8 @@ pub struct VehicleConfig {
 }
 
 impl Default for VehicleConfig {
-    /// The simulator's default quadrotor ([`Airframe::Agile`]) at the origin, its rate gains,
-    /// no angular damping, MPC_THR_HOVER its true hover thrust, PX4's land detector,
+    /// The simulator's default quadrotor ([`Airframe::Agile`]) at the origin, its rate gains
+    /// and airmode mixer on the raw gyro every 1 ms, no angular damping, MPC_THR_HOVER its true hover thrust, PX4's land detector,
     /// motion-capture-like noise plus a height bias drawn from the seed, a clock 0.988 of
     /// the wall clock's rate (PX4 SITL in lockstep) without jumps, PX4's default rates on
     /// the onboard link (ODOMETRY and LOCAL_POSITION_NED 30 Hz, ATTITUDE_QUATERNION 50 Hz,
@@ -218,6 +224,8 @@ impl Default for VehicleConfig {
             commander: CommanderConfig::default(),
             params: QuadParams::default(),
             rate_gains: RateGains::default(),
+            airmode: Airmode::RollPitch,
+            gyro_filter: None,
             angular_damping: 0.0,
             hover_thrust_param: None,
             land_detector: LandDetectorConfig::default(),
@@ -240,14 +248,24 @@ impl Default for VehicleConfig {
 impl VehicleConfig {
     /// PX4's stock SIH quadrotor (`make px4_sitl sihsim_quadx`, PX4's default parameters):
     /// [`QuadParams::px4_sih`] (1 kg, SIH_IXX/IYY/IZZ 0.025/0.025/0.030, 4 x 5 N, lever
-    /// SIH_L_ROLL = SIH_L_PITCH = 0.2 m, SIH_T_TAU 0.05 s, SIH_KDV 1), SIH_KDW 0.025 N m s
-    /// of angular damping, PX4's default rate gains ([`RateGains::px4_default`]) and
-    /// MPC_THR_HOVER 0.5 (PX4's default; the true hover thrust is 0.4905, PX4 SITL measured
-    /// 0.495). The rest as [`VehicleConfig::default`].
+    /// SIH_L_ROLL = SIH_L_PITCH = 0.2 m, SIH_T_TAU 0.05 s on the thrust, SIH_KDV 1),
+    /// SIH_KDW 0.025 N m s of angular damping, PX4's default rate gains
+    /// ([`RateGains::px4_default`]) and mixer (MC_AIRMODE 0, [`Airmode::Disabled`]) on the
+    /// gyro as PX4 filters it at SIH's 250 Hz ([`GyroFilter::px4_sih`]), MPC_THR_HOVER 0.5
+    /// (PX4's default; the true hover thrust is 0.4905, PX4 SITL measured 0.495), and the
+    /// estimate without the default's 5 ms pose latency (EKF2's output predictor: in a PX4
+    /// SITL flip its attitude and velocity lag SIH's truth by no measurable time). The rest
+    /// as [`VehicleConfig::default`].
     pub fn stock() -> Self {
         let params = QuadParams::px4_sih();
         Self {
             rate_gains: RateGains::px4_default(&params),
+            airmode: Airmode::Disabled,
+            gyro_filter: Some(GyroFilter::px4_sih()),
+            estimator: EstimatorConfig {
+                latency: 0.0,
+                ..EstimatorConfig::noisy()
+            },
             angular_damping: 0.025,
             hover_thrust_param: Some(0.5),
             params,
@@ -635,6 +653,9 @@ pub struct SimVehicle {
     cfg: VehicleConfig,
     plant: Plant,
     rate: RateController,
+    /// Steps of 1 ms per rate-loop update, and the rotor command held until the next.
+    rate_steps: u32,
+    held: Option<HeldCommand>,
     est: Estimator,
     commander: Commander,
     detector: LandDetector,
@@ -661,6 +682,18 @@ struct MotorDemand {
 
 const STEP: f64 = 0.001;
 
+/// A rotor command of the rate loop, held for the steps left until its next update.
+#[derive(Clone, Copy, Debug)]
+struct HeldCommand {
+    rotor_cmd: [f64; 4],
+    steps_left: u32,
+}
+
+/// Steps of 1 ms per rate-loop update: 1, or the gyro filter's sample interval.
+fn rate_steps(filter: Option<GyroFilter>) -> u32 {
+    filter.map_or(1, |f| (f.period() / STEP).round().clamp(1.0, 1000.0) as u32)
+}
+
 impl SimVehicle {
     /// A disarmed vehicle on the ground at `cfg.home`.
     pub fn new(cfg: VehicleConfig) -> Self {
@@ -672,7 +705,11 @@ impl SimVehicle {
         let landed = plant.contact() == Contact::OnGround;
         Self {
             plant,
-            rate: RateController::new(p, cfg.rate_gains.clone()),
+            rate: RateController::new(p, cfg.rate_gains.clone())
+                .with_airmode(cfg.airmode)
+                .with_gyro_filter(cfg.gyro_filter),
+            rate_steps: rate_steps(cfg.gyro_filter),
+            held: None,
             est: Estimator::new(cfg.estimator.clone(), cfg.seed),
             commander: Commander::new(cfg.commander),
             detector: LandDetector::new(cfg.land_detector),
@@ -1018,12 +1055,10 @@ impl SimVehicle {
         let offboard = matches!(control, Control::Offboard(_));
         let (rates, c) = self.fly(control, &e);
         let rotor_cmd = match rates {
-            Some(r) => {
-                let thrust = self.cfg.params.mass * c;
-                self.rate.update(&r, thrust, &e.w, STEP).rotor_cmd
-            }
+            Some(r) => self.rate_loop(&r, self.cfg.params.mass * c, &e.w),
             None => {
                 self.rate.reset();
+                self.held = None;
                 [0.0; 4]
             }
         };
@@ -1040,6 +1075,27 @@ impl SimVehicle {
         self.t += STEP;
         self.note_step(contact, offboard, e.p.z);
         self.stream(&e, out);
+    }
+
+    /// The rotor command for body rates `rates` (FLU) and collective thrust `thrust` \[N\]
+    /// with gyro `w`: a new one every `rate_steps` steps (the gyro filter's sample interval),
+    /// held in between.
+    fn rate_loop(&mut self, rates: &Vector3<f64>, thrust: f64, w: &Vector3<f64>) -> [f64; 4] {
+        match self.held.as_mut() {
+            Some(h) if h.steps_left > 0 => {
+                h.steps_left -= 1;
+                h.rotor_cmd
+            }
+            _ => {
+                let dt = f64::from(self.rate_steps) * STEP;
+                let rotor_cmd = self.rate.update(rates, thrust, w, dt).rotor_cmd;
+                self.held = Some(HeldCommand {
+                    rotor_cmd,
+                    steps_left: self.rate_steps - 1,
+                });
+                rotor_cmd
+            }
+        }
     }
 
     /// Updates the flight record after a step that ended in `contact`; `estimated_z` is the

@@ -1489,3 +1489,17 @@ fn the_nmpc_takes_the_vehicles_thrust_as_its_bound() {
     ));
     assert!(peak(&ls) <= c_max + 1e-6, "{} > {c_max}", peak(&ls));
 }
+
+#[test]
+fn the_stock_flip_flies_in_lockstep_with_the_stock_vehicle() {
+    // The flip planned for PX4's SIH quadrotor (read from the simulated PX4), flown on the
+    // stock vehicle as PX4 and SIH fly it. PX4 SITL flies it cleanly (the flight excerpted
+    // in tests/data/px4_stock_flip_*: one turn, 6.31 rad, lowest 1.87 m after it).
+    let ls = fly_at(stock_flip_config(None), VehicleConfig::stock(), 0.988, 90.0);
+    assert_flown("stock flip", &ls);
+    let turn = ls.vehicle.record().offboard_pitch_rotation.abs();
+    assert!(
+        (2.0 * PI - 0.3..2.0 * PI + 0.5).contains(&turn),
+        "turned {turn} rad"
+    );
+}

@@ -23,6 +23,10 @@
 //! omega_i' = (clamp(cmd_i, omega_min, omega_max) - omega_i) / rotor_tau,   f_i = k_thrust omega_i^2
 //! ```
 //!
+//! With [`RotorLag::Thrust`] (PX4's SIH) the lag acts on the thrust instead of the speed:
+//! `f_i' = (k_thrust clamp(cmd_i, omega_min, omega_max)^2 - f_i) / rotor_tau` (integrated as
+//! `omega_i^2`; the state still holds the speed `omega_i = sqrt(f_i / k_thrust)`).
+//!
 //! All 17 continuous states are advanced together by one classical Runge-Kutta 4 step per
 //! [`Plant::step`]; the disturbance and the rotor commands are held constant over the step.
 //!
@@ -67,6 +71,18 @@ pub const MAX_TOUCHDOWN_TILT: f64 = 0.6;
 /// Speed (m/s) below which a state at or below the ground plane counts as resting on it.
 const REST_SPEED: f64 = 1e-9;
 
+/// What the rotors' first-order lag (time constant [`QuadParams::rotor_tau`]) acts on.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum RotorLag {
+    /// The rotor speed: `omega' = (cmd - omega) / rotor_tau`, thrust `k_thrust omega^2`. A
+    /// rotor spins down faster than it spins up, and slowest of all up from rest.
+    #[default]
+    Speed,
+    /// The thrust, as PX4's SIH (`u += dt / SIH_T_TAU * (u_sp - u)`, thrust `SIH_T_MAX u`):
+    /// `f' = (k_thrust cmd^2 - f) / rotor_tau`, the same lag up and down.
+    Thrust,
+}
+
 /// Physical parameters of the quadrotor.
 #[derive(Clone, Debug, PartialEq)]
 pub struct QuadParams {
@@ -76,8 +92,10 @@ pub struct QuadParams {
     pub inertia: Vector3<f64>,
     /// Distance from the centre of gravity to each rotor axis, m (rotors at 45 degrees, X).
     pub arm: f64,
-    /// Time constant of the first-order rotor-speed response, s.
+    /// Time constant of the first-order rotor response, s.
     pub rotor_tau: f64,
+    /// What that first-order lag acts on (the speed, or the thrust as in PX4's SIH).
+    pub rotor_lag: RotorLag,
     /// Thrust coefficient, N/(rad/s)^2: `f = k_thrust omega^2`.
     pub k_thrust: f64,
     /// Yaw drag-torque coefficient, m: a rotor's yaw torque is `spin * k_torque * f`.
@@ -99,7 +117,7 @@ impl Default for QuadParams {
     /// * `mass` 1.0 kg;
     /// * `inertia` (0.006, 0.006, 0.011) kg m^2;
     /// * `arm` 0.17 m (lever about x and y: 0.17/sqrt(2) = 0.120 m);
-    /// * `rotor_tau` 0.03 s;
+    /// * `rotor_tau` 0.03 s, the lag on the rotor speed ([`RotorLag::Speed`]);
     /// * `k_thrust` 1.25e-6 N/(rad/s)^2 and `omega_max` 2800 rad/s, so a rotor gives at most
     ///   9.8 N and the thrust-to-weight ratio is about 4.0; hover is at 1401 rad/s;
     /// * `k_torque` 0.016 m;
@@ -116,6 +134,7 @@ impl Default for QuadParams {
             inertia: Vector3::new(0.006, 0.006, 0.011),
             arm: 0.17,
             rotor_tau: 0.03,
+            rotor_lag: RotorLag::Speed,
             k_thrust: 1.25e-6,
             k_torque: 0.016,
             omega_max: 2800.0,
@@ -134,7 +153,7 @@ impl QuadParams {
     /// * `inertia` (0.025, 0.025, 0.030) kg m^2 (SIH_IXX, SIH_IYY, SIH_IZZ);
     /// * `arm` 0.2 * sqrt(2) m: SIH's SIH_L_ROLL and SIH_L_PITCH (0.2 m) are the levers
     ///   themselves, half the distance between the left and right (front and rear) rotors;
-    /// * `rotor_tau` 0.05 s (SIH_T_TAU);
+    /// * `rotor_tau` 0.05 s (SIH_T_TAU), the lag on the thrust as SIH's ([`RotorLag::Thrust`]);
     /// * `k_thrust` 5e-6 N/(rad/s)^2 and `omega_max` 1000 rad/s: 5 N per rotor (SIH_T_MAX),
     ///   thrust-to-weight 2.04, hover at 0.4905 of full thrust;
     /// * `k_torque` 0.02 m: 0.1 N m per rotor at full thrust (SIH_Q_MAX);
@@ -144,9 +163,8 @@ impl QuadParams {
     ///
     /// The pitch authority is `2 * SIH_T_MAX * SIH_L_PITCH / SIH_IYY` = 80 rad/s^2 (SIH's
     /// pitch torque is `SIH_L_PITCH * SIH_T_MAX * (u0 - u1 + u2 - u3)` for rotor commands
-    /// `u` in [0, 1]). Differences from SIH: SIH's rotors are first order in thrust, this
-    /// plant's in rotor speed (thrust `k_thrust omega^2`; the same time constant near a
-    /// steady state); SIH's angular damper (SIH_KDW) is not part of the plant (apply it as a
+    /// `u` in [0, 1]). Differences from SIH: SIH integrates with forward Euler at 250 Hz, this
+    /// plant with RK4; SIH's angular damper (SIH_KDW) is not part of the plant (apply it as a
     /// disturbance torque).
     pub fn px4_sih() -> Self {
         Self {
@@ -154,6 +172,7 @@ impl QuadParams {
             inertia: Vector3::new(0.025, 0.025, 0.030),
             arm: 0.2 * std::f64::consts::SQRT_2,
             rotor_tau: 0.05,
+            rotor_lag: RotorLag::Thrust,
             k_thrust: 5e-6,
             k_torque: 0.02,
             omega_max: 1000.0,
@@ -602,23 +621,24 @@ impl Plant {
             f.z > self.total_mass() * self.params.g
         };
 
+        let lag = self.params.rotor_lag;
         // Swing angles to hold if the vehicle stays on the ground.
         let held_ang = self.attached_probe().map(|p| p.ang());
         let mut probe = self.probe.clone();
         let mut new = match probe.as_mut().filter(|p| p.is_attached()) {
             Some(p) => {
-                let x0 = pack_attached(&old, p);
+                let x0 = pack_attached(&old, p, lag);
                 let pp = *p.params();
                 let x1 = rk4(&x0, dt, |x: &Vec21| {
                     self.derivative_attached(x, &cmd, dist, &pp)
                 });
                 p.set_swing([x1[17], x1[18]], [x1[19], x1[20]]);
-                unpack(&x1.fixed_rows::<17>(0).into_owned())
+                unpack(&x1.fixed_rows::<17>(0).into_owned(), lag)
             }
             None => {
-                let x0 = pack(&old);
+                let x0 = pack(&old, lag);
                 let x1 = rk4(&x0, dt, |x: &Vec17| self.derivative(x, &cmd, dist));
-                unpack(&x1)
+                unpack(&x1, lag)
             }
         };
         if let Some(p) = probe.as_mut() {
@@ -710,7 +730,7 @@ impl Plant {
     /// Time derivative of the packed state.
     fn derivative(&self, x: &Vec17, cmd: &[f64; 4], dist: &Disturbance) -> Vec17 {
         let prm = &self.params;
-        let s = unpack(x);
+        let s = unpack(x, prm.rotor_lag);
         let vdot = self.nongravity_force(&s, dist) / prm.mass - Vector3::new(0.0, 0.0, prm.g);
         self.rigid_derivative(x, &s, cmd, dist, &vdot)
     }
@@ -725,7 +745,7 @@ impl Plant {
         pp: &ProbeParams,
     ) -> Vec21 {
         let xv: Vec17 = x.fixed_rows::<17>(0).into_owned();
-        let s = unpack(&xv);
+        let s = unpack(&xv, self.params.rotor_lag);
         let (ang, dang) = ([x[17], x[18]], [x[19], x[20]]);
         let f = self.nongravity_force(&s, dist);
         let acc = self.coupled(&f, pp, ang, dang);
@@ -772,8 +792,17 @@ impl Plant {
         d[8] = qdot.j;
         d[9] = qdot.k;
         d.fixed_rows_mut::<3>(10).copy_from(&wdot);
-        for i in 0..4 {
-            d[13 + i] = (cmd[i] - s.omega[i]) / prm.rotor_tau;
+        match prm.rotor_lag {
+            RotorLag::Speed => {
+                for i in 0..4 {
+                    d[13 + i] = (cmd[i] - s.omega[i]) / prm.rotor_tau;
+                }
+            }
+            RotorLag::Thrust => {
+                for i in 0..4 {
+                    d[13 + i] = (cmd[i] * cmd[i].abs() - x[13 + i]) / prm.rotor_tau;
+                }
+            }
         }
         d
     }
@@ -798,9 +827,9 @@ fn rk4<const N: usize>(
 }
 
 /// The vehicle state `s` followed by the swing state of the attached probe `p`.
-fn pack_attached(s: &QuadState, p: &Probe) -> Vec21 {
+fn pack_attached(s: &QuadState, p: &Probe, lag: RotorLag) -> Vec21 {
     let mut x = Vec21::zeros();
-    x.fixed_rows_mut::<17>(0).copy_from(&pack(s));
+    x.fixed_rows_mut::<17>(0).copy_from(&pack(s, lag));
     let ([a, b], [da, db]) = (p.ang(), p.dang());
     x[17] = a;
     x[18] = b;
@@ -809,7 +838,9 @@ fn pack_attached(s: &QuadState, p: &Probe) -> Vec21 {
     x
 }
 
-fn pack(s: &QuadState) -> Vec17 {
+/// The packed state: position, velocity, attitude, rates and the rotors' lagged quantity
+/// (the speed, or with [`RotorLag::Thrust`] the signed square of the speed).
+fn pack(s: &QuadState, lag: RotorLag) -> Vec17 {
     let mut x = Vec17::zeros();
     x.fixed_rows_mut::<3>(0).copy_from(&s.p);
     x.fixed_rows_mut::<3>(3).copy_from(&s.v);
@@ -820,17 +851,25 @@ fn pack(s: &QuadState) -> Vec17 {
     x[9] = q.k;
     x.fixed_rows_mut::<3>(10).copy_from(&s.w);
     for i in 0..4 {
-        x[13 + i] = s.omega[i];
+        x[13 + i] = match lag {
+            RotorLag::Speed => s.omega[i],
+            RotorLag::Thrust => s.omega[i] * s.omega[i].abs(),
+        };
     }
     x
 }
 
-fn unpack(x: &Vec17) -> QuadState {
+/// The state packed by [`pack`].
+fn unpack(x: &Vec17, lag: RotorLag) -> QuadState {
+    let speed = |r: f64| match lag {
+        RotorLag::Speed => r,
+        RotorLag::Thrust => r.signum() * r.abs().sqrt(),
+    };
     QuadState {
         p: x.fixed_rows::<3>(0).into_owned(),
         v: x.fixed_rows::<3>(3).into_owned(),
         q: UnitQuaternion::new_normalize(Quaternion::new(x[6], x[7], x[8], x[9])),
         w: x.fixed_rows::<3>(10).into_owned(),
-        omega: [x[13], x[14], x[15], x[16]],
+        omega: [speed(x[13]), speed(x[14]), speed(x[15]), speed(x[16])],
     }
 }

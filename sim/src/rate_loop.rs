@@ -25,6 +25,12 @@
 //! equally, up or down, as little as possible), then yaw (scaled down to what fits).
 //! Rotor thrusts become speed commands through the nominal thrust curve,
 //! `omega = sqrt(f / k_thrust)`.
+//!
+//! With [`Airmode::Disabled`] the mixer is PX4's default instead (MC_AIRMODE 0,
+//! [`mix_airmode_disabled`]): the collective is never raised to make room for a torque, so
+//! roll and pitch are cut where they do not fit. With a [`GyroFilter`] the controller sees
+//! the measured rate as PX4's rate controller does: low-pass filtered, its derivative taken
+//! of the filtered rate and filtered again.
 
 use crate::plant::QuadParams;
 use nalgebra::{Matrix4, Vector3, Vector4};
@@ -111,6 +117,131 @@ impl RateGains {
             kff: Vector3::zeros(),
             i_limit: scale(PX4_RATE_INT_LIM),
         }
+    }
+}
+
+/// How the mixer gives up a demand the rotors cannot deliver (PX4's MC_AIRMODE).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Airmode {
+    /// This loop's own mixer ([`mix_detailed`]): roll/pitch first, the collective shifted up
+    /// or down as needed to fit them, then yaw (like PX4's MC_AIRMODE 1).
+    #[default]
+    RollPitch,
+    /// PX4's default, MC_AIRMODE 0 ([`mix_airmode_disabled`]): the collective may only be
+    /// lowered; roll and pitch are cut to what fits.
+    Disabled,
+}
+
+/// PX4's gyro filtering ahead of its rate controller (sensors' `VehicleAngularVelocity`):
+/// at the gyro's rate, a second-order Butterworth low-pass on the rate (IMU_GYRO_CUTOFF);
+/// the angular acceleration of the D term is the difference of the filtered rate over the
+/// sample interval, low-pass filtered again (IMU_DGYRO_CUTOFF). The rate controller runs on
+/// every gyro sample.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GyroFilter {
+    /// Gyro (and rate-loop) rate, Hz.
+    pub sample_rate: f64,
+    /// Cutoff of the rate's low-pass, Hz (IMU_GYRO_CUTOFF).
+    pub rate_cutoff: f64,
+    /// Cutoff of the angular acceleration's low-pass, Hz (IMU_DGYRO_CUTOFF).
+    pub accel_cutoff: f64,
+}
+
+impl GyroFilter {
+    /// PX4 SITL with SIH: the gyro at 250 Hz (SIH steps at the lesser of IMU_GYRO_RATEMAX
+    /// and IMU_INTEG_RATE, 800 and 250 Hz), IMU_GYRO_CUTOFF 40 Hz, IMU_DGYRO_CUTOFF 30 Hz.
+    pub fn px4_sih() -> Self {
+        Self {
+            sample_rate: 250.0,
+            rate_cutoff: 40.0,
+            accel_cutoff: 30.0,
+        }
+    }
+
+    /// The sample interval, s.
+    pub fn period(&self) -> f64 {
+        1.0 / self.sample_rate
+    }
+}
+
+/// PX4's `LowPassFilter2p`: a second-order Butterworth low-pass (bilinear transform), per
+/// axis; a cutoff not below half the sample rate, or not positive, passes the signal.
+#[derive(Clone, Debug)]
+struct LowPass2p {
+    b: [f64; 3],
+    a: [f64; 2],
+    delay: [Vector3<f64>; 2],
+}
+
+impl LowPass2p {
+    fn new(sample_rate: f64, cutoff: f64) -> Self {
+        if !(cutoff > 0.0 && cutoff < 0.5 * sample_rate) {
+            return Self {
+                b: [1.0, 0.0, 0.0],
+                a: [0.0, 0.0],
+                delay: [Vector3::zeros(); 2],
+            };
+        }
+        let ohm = (std::f64::consts::PI * cutoff / sample_rate).tan();
+        let k = 2.0 * std::f64::consts::FRAC_PI_4.cos() * ohm;
+        let c = 1.0 + k + ohm * ohm;
+        let b0 = ohm * ohm / c;
+        Self {
+            b: [b0, 2.0 * b0, b0],
+            a: [2.0 * (ohm * ohm - 1.0) / c, (1.0 - k + ohm * ohm) / c],
+            delay: [Vector3::zeros(); 2],
+        }
+    }
+
+    /// Settles the filter at `x` (its output is `x` from now on while the input stays).
+    fn reset(&mut self, x: &Vector3<f64>) {
+        let d = x / (self.b[0] + self.b[1] + self.b[2]);
+        self.delay = [d, d];
+    }
+
+    fn apply(&mut self, x: &Vector3<f64>) -> Vector3<f64> {
+        let d0 = x - self.delay[0] * self.a[0] - self.delay[1] * self.a[1];
+        let y = d0 * self.b[0] + self.delay[0] * self.b[1] + self.delay[1] * self.b[2];
+        self.delay = [d0, self.delay[0]];
+        y
+    }
+}
+
+/// The state of a [`GyroFilter`].
+#[derive(Clone, Debug)]
+struct GyroFilterState {
+    rate: LowPass2p,
+    accel: LowPass2p,
+    /// The last filtered rate; `None` until the first sample after a reset.
+    prev: Option<Vector3<f64>>,
+}
+
+impl GyroFilterState {
+    fn new(f: &GyroFilter) -> Self {
+        Self {
+            rate: LowPass2p::new(f.sample_rate, f.rate_cutoff),
+            accel: LowPass2p::new(f.sample_rate, f.accel_cutoff),
+            prev: None,
+        }
+    }
+
+    /// The filtered rate and angular acceleration for gyro sample `w`, `dt` after the last
+    /// (the first sample after a reset settles the filters at `w` and zero acceleration).
+    fn apply(&mut self, w: &Vector3<f64>, dt: f64) -> (Vector3<f64>, Vector3<f64>) {
+        let Some(prev) = self.prev else {
+            self.rate.reset(w);
+            self.accel.reset(&Vector3::zeros());
+            self.prev = Some(*w);
+            return (*w, Vector3::zeros());
+        };
+        let rate = self.rate.apply(w);
+        let raw = if dt.is_finite() && dt > 0.0 {
+            (rate - prev) / dt
+        } else {
+            Vector3::zeros()
+        };
+        self.prev = Some(rate);
+        (rate, self.accel.apply(&raw))
     }
 }
 
@@ -261,6 +392,100 @@ pub fn mix_detailed(params: &QuadParams, thrust: f64, torque: &Vector3<f64>) -> 
     }
 }
 
+/// Per-rotor thrusts for collective thrust `thrust` (N) and body torque `torque` (N m) as
+/// PX4's control allocator with its default MC_AIRMODE 0 (`ControlAllocationSequentialDesaturation::
+/// mixAirmodeDisabled`), in newtons instead of PX4's normalized commands:
+///
+/// 1. mix thrust, roll and pitch; desaturate along the thrust direction, lowering it only;
+/// 2. desaturate along the roll direction, then along the pitch direction;
+/// 3. add yaw; desaturate along yaw with the upper bound 15 % of the range higher; lower the
+///    thrust again if needed; clip to `[f_min, f_max]`.
+///
+/// Each desaturation moves the thrusts along its direction `v` by `k_min + k_max` (the most
+/// negative and most positive of the moves that would bring each rotor out of its bounds back
+/// to the bound), then by half of that again; PX4 skips rotors whose entry of `v` is below
+/// 0.2 (never on a quad X: all entries of a direction have the same size). The flags tell
+/// which parts of the demand the clipped thrusts do not deliver.
+///
+/// Never panics; a singular allocation or non-finite demand gives thrusts at `f_min` and
+/// all saturation flags set.
+pub fn mix_airmode_disabled(params: &QuadParams, thrust: f64, torque: &Vector3<f64>) -> MixResult {
+    let f_min = params.rotor_thrust_min();
+    let f_max = params.rotor_thrust_max().max(f_min);
+    let a = allocation_matrix(params);
+    let demand_finite = thrust.is_finite() && torque.iter().all(|x| x.is_finite());
+    let (Some(b), true) = (a.try_inverse(), demand_finite) else {
+        return MixResult {
+            thrusts: [f_min; 4],
+            achieved: a * Vector4::repeat(f_min),
+            roll_pitch_saturated: true,
+            thrust_saturated: true,
+            yaw_saturated: true,
+        };
+    };
+    let col = |i: usize| -> Vector4<f64> { b.column(i).into_owned() };
+    let (c_t, c_roll, c_pitch, c_yaw) = (col(0), col(1), col(2), col(3));
+    let bounds = (f_min, f_max);
+    let mut f = c_t * thrust + c_roll * torque.x + c_pitch * torque.y;
+    desaturate(&mut f, &-c_t, bounds, true);
+    desaturate(&mut f, &c_roll, bounds, false);
+    desaturate(&mut f, &c_pitch, bounds, false);
+    f += c_yaw * torque.z;
+    desaturate(
+        &mut f,
+        &c_yaw,
+        (f_min, f_max + 0.15 * (f_max - f_min)),
+        false,
+    );
+    desaturate(&mut f, &-c_t, bounds, true);
+    let thrusts = f.map(|x| x.clamp(f_min, f_max));
+    let achieved = a * thrusts;
+    let eps = 1e-9 * f_max.max(1.0);
+    MixResult {
+        thrusts: [thrusts[0], thrusts[1], thrusts[2], thrusts[3]],
+        achieved,
+        roll_pitch_saturated: (achieved.fixed_rows::<2>(1) - torque.xy()).amax() > eps,
+        thrust_saturated: (achieved[0] - thrust).abs() > eps,
+        yaw_saturated: (achieved[3] - torque.z).abs() > eps,
+    }
+}
+
+/// PX4's `desaturateActuators`: moves `f` along `v` by [`desaturation_gain`], then by half
+/// the gain left; with `increase_only`, not at all if the first gain is negative.
+fn desaturate(f: &mut Vector4<f64>, v: &Vector4<f64>, bounds: (f64, f64), increase_only: bool) {
+    let gain = desaturation_gain(f, v, bounds);
+    if increase_only && gain < 0.0 {
+        return;
+    }
+    *f += v * gain;
+    let gain = 0.5 * desaturation_gain(f, v, bounds);
+    *f += v * gain;
+}
+
+/// PX4's `computeDesaturationGain`: of the moves along `v` that would bring each rotor
+/// outside `bounds` back to its bound, the most negative (or 0) plus the most positive (or
+/// 0); rotors whose entry of `v` is below 0.2 of the largest are skipped.
+fn desaturation_gain(f: &Vector4<f64>, v: &Vector4<f64>, (lo, hi): (f64, f64)) -> f64 {
+    let floor = 0.2 * v.amax();
+    let (mut k_min, mut k_max) = (0.0_f64, 0.0_f64);
+    for (x, d) in f.iter().zip(v.iter()) {
+        if d.abs() < floor || d.abs() < 1e-12 {
+            continue;
+        }
+        let bound = if *x < lo {
+            lo
+        } else if *x > hi {
+            hi
+        } else {
+            continue;
+        };
+        let k = (bound - x) / d;
+        k_min = k_min.min(k);
+        k_max = k_max.max(k);
+    }
+    k_min + k_max
+}
+
 /// Rotor speed command for thrust `f` through the nominal thrust curve, clamped to
 /// `[omega_min, omega_max]`.
 pub fn thrust_to_speed(params: &QuadParams, f: f64) -> f64 {
@@ -282,6 +507,8 @@ pub struct RateController {
     prev_meas: Option<Vector3<f64>>,
     prev_sp: Option<Vector3<f64>>,
     last_mix: Option<MixResult>,
+    airmode: Airmode,
+    gyro_filter: Option<(GyroFilter, GyroFilterState)>,
 }
 
 impl RateController {
@@ -295,7 +522,34 @@ impl RateController {
             prev_meas: None,
             prev_sp: None,
             last_mix: None,
+            airmode: Airmode::default(),
+            gyro_filter: None,
         }
+    }
+
+    /// This controller with mixer `airmode`.
+    pub fn with_airmode(self, airmode: Airmode) -> Self {
+        Self { airmode, ..self }
+    }
+
+    /// This controller on a gyro filtered as PX4's (`None`: the rate as measured, its
+    /// derivative the backward difference). Call [`RateController::update`] at the filter's
+    /// sample rate.
+    pub fn with_gyro_filter(self, filter: Option<GyroFilter>) -> Self {
+        Self {
+            gyro_filter: filter.map(|f| (f, GyroFilterState::new(&f))),
+            ..self
+        }
+    }
+
+    /// The mixer's airmode.
+    pub fn airmode(&self) -> Airmode {
+        self.airmode
+    }
+
+    /// The gyro filter, if any.
+    pub fn gyro_filter(&self) -> Option<GyroFilter> {
+        self.gyro_filter.as_ref().map(|(f, _)| *f)
     }
 
     /// The nominal parameters the controller uses.
@@ -313,12 +567,15 @@ impl RateController {
         self.last_mix
     }
 
-    /// Clears the integrator and the derivative memories.
+    /// Clears the integrator, the derivative memories and the gyro filter.
     pub fn reset(&mut self) {
         self.integral = Vector3::zeros();
         self.prev_meas = None;
         self.prev_sp = None;
         self.last_mix = None;
+        if let Some((f, state)) = self.gyro_filter.as_mut() {
+            *state = GyroFilterState::new(f);
+        }
     }
 
     /// One update: body-rate setpoint `rate_sp` (rad/s), collective thrust setpoint
@@ -332,9 +589,17 @@ impl RateController {
         rate_meas: &Vector3<f64>,
         dt: f64,
     ) -> RateOutput {
+        let dt_ok = dt.is_finite() && dt > 0.0;
+        let filtered = self
+            .gyro_filter
+            .as_mut()
+            .map(|(_, s)| s.apply(rate_meas, dt));
+        let (rate_meas, d_filtered) = match &filtered {
+            Some((w, d)) => (w, Some(*d)),
+            None => (rate_meas, None),
+        };
         let g = &self.gains;
         let j = self.nominal.inertia;
-        let dt_ok = dt.is_finite() && dt > 0.0;
         let e = rate_sp - rate_meas;
 
         // Integrator with anti-windup (frozen on axes the mixer saturated last time).
@@ -356,8 +621,9 @@ impl RateController {
             self.integral = (self.integral + inc).zip_map(&lim, |x, l| x.clamp(-l, l));
         }
 
-        let d_meas = match (self.prev_meas, dt_ok) {
-            (Some(p), true) => (rate_meas - p) / dt,
+        let d_meas = match (d_filtered, self.prev_meas, dt_ok) {
+            (Some(d), _, _) => d,
+            (None, Some(p), true) => (rate_meas - p) / dt,
             _ => Vector3::zeros(),
         };
         let d_sp = match (self.prev_sp, dt_ok) {
@@ -372,7 +638,10 @@ impl RateController {
             + g.kff.component_mul(&j).component_mul(&d_sp)
             + rate_meas.cross(&j.component_mul(rate_meas));
 
-        let m = mix_detailed(&self.nominal, thrust_sp, &torque_sp);
+        let m = match self.airmode {
+            Airmode::RollPitch => mix_detailed(&self.nominal, thrust_sp, &torque_sp),
+            Airmode::Disabled => mix_airmode_disabled(&self.nominal, thrust_sp, &torque_sp),
+        };
         self.last_mix = Some(m);
         let rotor_cmd = m.thrusts.map(|f| thrust_to_speed(&self.nominal, f));
         RateOutput {

@@ -372,3 +372,42 @@ fn non_finite_inputs_crash_without_nan_state() {
     plant.set_state(QuadState::at_rest(Vector3::new(f64::NAN, 0.0, 1.0)));
     assert!(plant.crashed().is_some() && plant.state().is_finite());
 }
+
+#[test]
+fn the_thrust_lag_of_px4s_sih_is_first_order_in_thrust_up_and_down() {
+    use mpc_sim::plant::RotorLag;
+    let p = QuadParams::px4_sih();
+    assert_eq!(p.rotor_lag, RotorLag::Thrust);
+    let (tau, f_max) = (p.rotor_tau, p.rotor_thrust_max());
+    // On the ground below lift-off (4 x 2 N < 9.81 N): from rest to 2 N per rotor, then
+    // back to 0.4 N; the thrust follows each command exponentially.
+    let mut plant = Plant::new(p.clone(), QuadState::at_rest(Vector3::zeros()));
+    let speed = |f: f64| (f / p.k_thrust).sqrt();
+    let mut f0 = 0.0;
+    for (f_cmd, steps) in [(2.0, 200), (0.4, 200)] {
+        for k in 1..=steps {
+            assert_eq!(
+                plant.step(&[speed(f_cmd); 4], &Disturbance::default(), DT),
+                Contact::OnGround
+            );
+            let want = f_cmd + (f0 - f_cmd) * (-(k as f64) * DT / tau).exp();
+            for f in plant.rotor_thrusts() {
+                assert!((f - want).abs() < 1e-6 * f_max, "{k}: {f} vs {want}");
+            }
+        }
+        f0 = plant.rotor_thrusts()[0];
+    }
+    // The speed lag (the default) is slower up from rest: 0.4 of the thrust after one
+    // time constant instead of 0.63.
+    let slow = QuadParams {
+        rotor_lag: RotorLag::Speed,
+        ..p.clone()
+    };
+    let mut plant = Plant::new(slow, QuadState::at_rest(Vector3::zeros()));
+    run(&mut plant, [speed(2.0); 4], &Disturbance::default(), 50);
+    let f = plant.rotor_thrusts()[0];
+    assert!(
+        (f / 2.0 - (1.0 - (-1.0f64).exp()).powi(2)).abs() < 1e-3,
+        "{f}"
+    );
+}

@@ -329,3 +329,35 @@ fn integrator_is_limited_and_reset() {
     );
     assert!(o.rotor_cmd.iter().all(|x| x.is_finite()));
 }
+
+/// PX4's mixer without airmode (MC_AIRMODE 0) on its SIH quadrotor: a pitch demand beyond
+/// the rotors is cut around the collective (the collective is never raised); a demand that
+/// fits only with less collective gets less collective and all of its torque.
+#[test]
+fn without_airmode_the_collective_is_kept_or_lowered_never_raised() {
+    use mpc_sim::rate_loop::mix_airmode_disabled;
+    let p = QuadParams::px4_sih();
+    // 8.64 N (0.432 of the maximum) and -3 N m of pitch: the front rotors would need 5.91 N,
+    // the rear ones -1.59 N (rotors 0..3: front-right, rear-left, front-left, rear-right).
+    let m = mix_airmode_disabled(&p, 8.64, &Vector3::new(0.0, -3.0, 0.0));
+    let want = [4.32, 0.0, 4.32, 0.0];
+    for (f, w) in m.thrusts.iter().zip(want) {
+        assert!((f - w).abs() < 1e-9, "{:?}", m.thrusts);
+    }
+    assert!((m.achieved[0] - 8.64).abs() < 1e-9 && (m.achieved[2] + 1.728).abs() < 1e-9);
+    assert!(m.roll_pitch_saturated && !m.thrust_saturated && !m.yaw_saturated);
+    // This loop's own airmode raises the collective to 10 N for -2 N m.
+    let air = mix_detailed(&p, 8.64, &Vector3::new(0.0, -3.0, 0.0));
+    assert!((air.achieved[0] - 10.0).abs() < 1e-9 && (air.achieved[2] + 2.0).abs() < 1e-9);
+    // 13.94 N and -1.35 N m: the front rotors would need 5.17 N; the collective is lowered
+    // by 0.69 N and the pitch torque delivered.
+    let m = mix_airmode_disabled(&p, 13.94, &Vector3::new(0.0, -1.35, 0.0));
+    assert!((m.achieved[0] - 13.25).abs() < 1e-9, "{:?}", m.achieved);
+    assert!((m.achieved[2] + 1.35).abs() < 1e-9, "{:?}", m.achieved);
+    assert!(m.thrust_saturated && !m.roll_pitch_saturated);
+    // What fits is mixed exactly.
+    let m = mix_airmode_disabled(&p, 9.81, &Vector3::new(0.1, -0.2, 0.05));
+    assert!(!m.saturated());
+    let a = allocation_matrix(&p) * Vector4::from(m.thrusts);
+    assert!((a - Vector4::new(9.81, 0.1, -0.2, 0.05)).amax() < 1e-12);
+}
