@@ -73,6 +73,11 @@ TOPICS = {
     "vehicle_land_detected": ["landed"],
     "vehicle_local_position": ["z"],
 }
+# PX4's simulated sensors besides the IMU: when they stop publishing while the log goes on,
+# PX4 itself has failed (its estimator loses height, heading and position), not the flight
+# controller it was flying for.
+SIM_SENSORS = ["sensor_baro", "sensor_mag", "sensor_gps"]
+SENSOR_STALL_S = 2.0
 
 
 class LogError(Exception):
@@ -84,7 +89,7 @@ def load(path):
     if ULog is None:
         raise LogError(f"pyulog is not installed (pip install pyulog==1.3.0): {IMPORT_ERROR}")
     try:
-        ulog = ULog(path, list(TOPICS))
+        ulog = ULog(path, list(TOPICS) + SIM_SENSORS)
     except Exception as e:  # pyulog raises plain exceptions on a bad file
         raise LogError(f"cannot read {path} as a ULog: {e}") from e
     topics = {}
@@ -98,7 +103,21 @@ def load(path):
             raise LogError(f"{path}: topic {name} lacks fields {missing}")
         topics[name] = {f: data[f].astype(float) for f in fields}
         topics[name]["t"] = data["timestamp"].astype(float) / 1e6
+    for name in SIM_SENSORS:
+        found = [d for d in ulog.data_list if d.name == name and d.multi_id == 0]
+        if found and len(found[0].data["timestamp"]):
+            topics[name] = {"t": found[0].data["timestamp"].astype(float) / 1e6}
     return topics
+
+
+def sensor_stall(topics, t_start, t_end):
+    """PX4's simulated sensors that stopped more than SENSOR_STALL_S before the log's end:
+    {"at_s": when the first stopped (log time), "topics": [...]}, or None."""
+    stopped = {name: float(topics[name]["t"][-1]) for name in SIM_SENSORS
+               if name in topics and t_end - topics[name]["t"][-1] > SENSOR_STALL_S}
+    if not stopped:
+        return None
+    return {"at_s": round(min(stopped.values()) - t_start, 3), "topics": sorted(stopped)}
 
 
 def intervals(t, mask, t_end):
@@ -273,6 +292,7 @@ def judge(topics):
         "final": final_state(topics, height, tilt),
         "estimator_height_error_at_start_m": round(ekf0 - float(height[0]), 3),
         "estimator_height_error_at_touchdown_m": [td["estimator_height_error_m"] for td in tds],
+        "px4_sensor_stall": sensor_stall(topics, float(pos["t"][0]), t_end),
     }
 
 
