@@ -12,7 +12,8 @@
 //! * **Off the mission.** The vehicle has left its mission when, outside the landing, it is
 //!   far below the reference ([`WatchConfig::below`], more around the flip), far from it
 //!   ([`WatchConfig::off_course`]), upside down outside the flip ([`WatchConfig::inverted`]),
-//!   each for a while, or on the ground (PX4's land detector) after take-off. The controller
+//!   each for a while, or on the ground (PX4's land detector, or the estimate's height under
+//!   [`WatchConfig::ground_contact`]) after take-off. The controller
 //!   then stops the mission: a vehicle that did not fly its mission never passes.
 
 use std::collections::VecDeque;
@@ -51,11 +52,15 @@ pub struct WatchConfig {
     pub stall_time: f64,
     /// Only below this height above the start point \[m\] (the estimate's error included).
     pub stall_height: f64,
+    /// After take-off and before the landing, the estimate's height over the start point
+    /// under this: the vehicle has hit the ground \[m\] (no mission flies this low there).
+    pub ground_contact: f64,
 }
 
 impl Default for WatchConfig {
     /// 1.5 m below for 0.5 s (2.5 m around the flip), 3 m off for 1 s, tilted over 100 deg
-    /// for 0.25 s, a landing's descent judged over 0.5 s below 1.5 m.
+    /// for 0.25 s, a landing's descent judged over 0.5 s below 1.5 m, ground contact under
+    /// 0.3 m.
     fn default() -> Self {
         Self {
             below: 1.5,
@@ -67,6 +72,7 @@ impl Default for WatchConfig {
             inverted_time: 0.25,
             stall_time: 0.5,
             stall_height: 1.5,
+            ground_contact: 0.3,
         }
     }
 }
@@ -142,12 +148,25 @@ impl Watch {
         let deviation = if matches!(phase, Phase::Land | Phase::Landed) {
             None
         } else {
-            self.deviation(t, phase, s, r, px4_on_ground)
+            self.deviation(
+                t,
+                phase,
+                s,
+                r,
+                px4_on_ground || self.hit_ground(phase, height),
+            )
         };
         Seen {
             on_ground,
             deviation,
         }
+    }
+
+    /// Down on the ground between take-off and landing by the estimate's height: PX4's land
+    /// detector takes seconds to say so, and a vehicle that hit the ground in a maneuver
+    /// (in a flip starved of CPU: 4 m/s by the truth) may bounce and fly on.
+    fn hit_ground(&self, phase: Phase, height: f64) -> bool {
+        self.airborne && phase != Phase::Takeoff && height < self.cfg.ground_contact
     }
 
     /// The landing's reference descends, the vehicle does not, low enough: over the last

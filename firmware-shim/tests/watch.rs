@@ -192,3 +192,29 @@ fn a_landing_whose_reference_is_a_metre_below_the_ground_is_down() {
     // 0.3 - 0.3 t < -1.0 from t = 4.33 s.
     assert!((4.33..4.35).contains(&t), "{t}");
 }
+
+#[test]
+fn the_estimate_on_the_ground_between_take_off_and_landing_leaves_the_mission_at_once() {
+    // The recovery's reference 3 m up, the estimate 0.1 m over the start point: less than
+    // the 2.5 m the flip is allowed below its reference, but on the ground.
+    let r = reference(Phase::Recover, [0.0, 0.0, 2.6], [0.0; 3]);
+    let down = state([0.0, 0.0, 0.1], [0.0, 0.0, -3.0], 0.0);
+    let (t, d) = hold(&mut airborne(), 1.0, 0.1, Phase::Recover, &down, &r, false)
+        .0
+        .expect("down");
+    assert_eq!((t, d), (0.0, Deviation::OnGround));
+    // 0.4 m up is flying (if low).
+    let low = state([0.0, 0.0, 0.4], [0.0; 3], 0.0);
+    assert_eq!(
+        hold(&mut airborne(), 1.0, 0.3, Phase::Recover, &low, &r, false).0,
+        None
+    );
+    // In the take-off and the landing the ground is where the vehicle should be.
+    let rt = reference(Phase::Takeoff, [0.0, 0.0, 0.5], [0.0; 3]);
+    assert_eq!(
+        hold(&mut airborne(), 1.0, 1.0, Phase::Takeoff, &down, &rt, false).0,
+        None
+    );
+    let mut w = airborne();
+    assert!(landing(&mut w, 1.0, |_| 0.1, 0.0, false).is_some());
+}
