@@ -1,7 +1,7 @@
 //! The generated C ABI (`pub mod ffi`): status codes and the conversions every function
 //! uses, then one `extern "C"` function per `Solver` method, named `<prefix>_<method>`
 //! (`<prefix>` the crate name). Each checks its pointers, returns a status code and cannot
-//! panic. Their C declarations are in `templates/header.h.tera`, which must follow.
+//! panic. Their C declarations are in `codegen/templates/header.h.tera`, which must follow.
 
 use proc_macro2::{Ident, TokenStream};
 use quote::{format_ident, quote};

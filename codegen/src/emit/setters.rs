@@ -4,7 +4,9 @@
 //!
 //! To add a setter: a function here that returns its `pub fn` (with its doc), called from
 //! [`items`](super::items) where it belongs in the `impl Solver`, and, for C callers, its
-//! `extern "C"` twin in `ffi.rs` and its declaration in `templates/header.h.tera`.
+//! `extern "C"` twin on `CAbi` (`c_abi.rs`), listed in [`ffi`](super::ffi), and its
+//! declaration in `codegen/templates/header.h.tera` (`docs/codegen.md`, "Where to change
+//! what").
 
 use proc_macro2::TokenStream;
 use quote::{format_ident, quote};
