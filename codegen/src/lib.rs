@@ -132,6 +132,14 @@ fn allows() -> proc_macro2::TokenStream {
     }
 }
 
+/// The solver's items ([`emit::items`]) and, with `opts.c_abi`, the C ABI module
+/// ([`emit::ffi`]).
+fn solver_items(l: &Lowered, opts: &Options) -> proc_macro2::TokenStream {
+    let items = emit::items(l, opts);
+    let ffi = opts.c_abi.then(|| emit::ffi(l, opts));
+    quote::quote!(#items #ffi)
+}
+
 /// Lowers and emits `ocp` as a crate: `Cargo.toml`, `src/lib.rs` and, with the C ABI,
 /// `include/<name>.h`.
 ///
@@ -142,12 +150,7 @@ pub fn generate(ocp: &Ocp<'_>, opts: &Options) -> Result<GeneratedCrate, Codegen
     let l = lower_with(ocp, opts.exact_hessian)?;
     let name = opts.crate_name(&l.name);
     check_ident(&name)?;
-    let items = emit::items(&l, opts);
-    let ffi = if opts.c_abi {
-        emit::ffi(&l, opts)
-    } else {
-        quote::quote!()
-    };
+    let items = solver_items(&l, opts);
     let allows = allows();
     let std_feature = if opts.staticlib {
         quote::quote! {
@@ -168,7 +171,6 @@ pub fn generate(ocp: &Ocp<'_>, opts: &Options) -> Result<GeneratedCrate, Codegen
         #allows
         #std_feature
         #items
-        #ffi
     };
     let body = emit::format_file("src/lib.rs", body_tokens, true)?;
     let st = stamp(&l.name, &body, opts);
@@ -203,12 +205,7 @@ pub fn generate_module(
 ) -> Result<String, CodegenError> {
     check_ident(module)?;
     let l = lower_with(ocp, opts.exact_hessian)?;
-    let items = emit::items(&l, opts);
-    let ffi = if opts.c_abi {
-        emit::ffi(&l, opts)
-    } else {
-        quote::quote!()
-    };
+    let items = solver_items(&l, opts);
     let allows = allows();
     let m = quote::format_ident!("{}", module);
     let doc = format!(
@@ -221,7 +218,6 @@ pub fn generate_module(
             #![allow(unsafe_code)]
             #allows
             #items
-            #ffi
         }
     };
     let body = emit::format_file(module, tokens, false)?;
