@@ -358,125 +358,188 @@ pub(crate) fn write_csv(path: &Path, run: &ClosedLoop) -> std::io::Result<()> {
 }
 
 pub(crate) fn run(args: &BenchArgs) -> ExitCode {
-    let pointmass = match args.model.as_str() {
-        "qrbench" => false,
-        "pointmass" => true,
-        other => {
-            eprintln!("error: --model {other}: unknown; the benchmark problems are {MODELS}");
+    let case = match case_of(args) {
+        Ok(case) => case,
+        Err(e) => {
+            eprintln!("error: {e}");
             return ExitCode::from(2);
         }
     };
-    let solver = if pointmass {
-        if args.horizon != 10 || args.f32 {
-            eprintln!(
-                "error: --model pointmass --horizon {}{}: no solver generated for this case; \
-                 compiled in: --horizon 10 (f64)",
-                args.horizon,
-                if args.f32 { " --f32" } else { "" },
-            );
-            return ExitCode::from(2);
-        }
-        POINTMASS
+    let Some(rounds) = fly_rounds(args, &case) else {
+        return ExitCode::FAILURE;
+    };
+    let csv = if args.no_csv {
+        None
     } else {
-        let Some(&(_, _, solver)) = CASES
-            .iter()
-            .find(|c| c.0 == args.horizon && c.1 == args.f32)
-        else {
-            let have: Vec<String> = CASES
-                .iter()
-                .map(|c| format!("--horizon {}{}", c.0, if c.1 { " --f32" } else { "" }))
-                .collect();
-            eprintln!(
-                "error: --horizon {}{}: no solver generated for this case; compiled in: {}",
-                args.horizon,
-                if args.f32 { " --f32" } else { "" },
-                have.join(", ")
-            );
-            return ExitCode::from(2);
-        };
-        solver
+        let path = args
+            .csv
+            .clone()
+            .unwrap_or_else(|| default_csv(args, case.pointmass));
+        if let Err(e) = write_csv(&path, &rounds.last) {
+            eprintln!("error: {}: {e}", path.display());
+            return ExitCode::FAILURE;
+        }
+        Some(path)
     };
+    let report = report(args, &case, &rounds, csv);
+    if args.json {
+        match serde_json::to_string(&report) {
+            Ok(s) => println!("{s}"),
+            Err(e) => {
+                eprintln!("error: JSON: {e}");
+                return ExitCode::FAILURE;
+            }
+        }
+    } else {
+        print_summary(args, &case, &report);
+    }
+    if report.all_ok {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::FAILURE
+    }
+}
+
+/// What `mpcc bench` flies, from its command line.
+struct Case {
+    /// The point mass (`--model pointmass`), else QR-bench.
+    pointmass: bool,
+    /// The solver, described.
+    solver: &'static str,
+    /// The full SQP's Hessian is the exact one (the solver generated with it).
+    exact: bool,
+    /// The settings the command line overrides.
+    over: Overrides,
+}
+
+/// The case the command line asks for, or the message saying why there is none (checked
+/// in this order: the model, the horizon and scalar, the rounds, the QP settings, the
+/// Hessian, the watchdog).
+fn case_of(args: &BenchArgs) -> Result<Case, String> {
+    let (pointmass, solver) = problem(args)?;
     if args.rounds == 0 {
-        eprintln!("error: --rounds 0: run at least one round");
-        return ExitCode::from(2);
+        return Err("--rounds 0: run at least one round".into());
     }
     let loose = match args.sqp_qps.as_deref() {
         None => None,
-        Some(_) if !args.sqp => {
-            eprintln!("error: --sqp-qps applies to the full SQP: add --sqp");
-            return ExitCode::from(2);
-        }
+        Some(_) if !args.sqp => return Err("--sqp-qps applies to the full SQP: add --sqp".into()),
         Some("loose") => Some(true),
         Some("tight") => Some(false),
-        Some(other) => {
-            eprintln!("error: --sqp-qps {other}: use loose or tight");
-            return ExitCode::from(2);
-        }
+        Some(other) => return Err(format!("--sqp-qps {other}: use loose or tight")),
     };
     let warm_active_set = match args.warm_active_set.as_deref() {
         None => None,
         Some("on") => Some(true),
         Some("off") => Some(false),
-        Some(other) => {
-            eprintln!("error: --warm-active-set {other}: use on or off");
-            return ExitCode::from(2);
-        }
+        Some(other) => return Err(format!("--warm-active-set {other}: use on or off")),
     };
-    // The full SQP's Hessian: exact where a solver generated with it is compiled in.
+    let (exact, solver) = hessian(args, pointmass, solver)?;
+    if args.sqp_watchdog.is_some() && !(args.sqp && exact) {
+        return Err(
+            "--sqp-watchdog applies to the full SQP with the exact Hessian: add --sqp \
+                    (and leave out --hessian gauss-newton)"
+                .into(),
+        );
+    }
+    Ok(Case {
+        pointmass,
+        solver,
+        exact,
+        over: Overrides {
+            loose,
+            warm_active_set,
+            watchdog: args.sqp_watchdog,
+        },
+    })
+}
+
+/// The problem (`true`: the point mass) and the real-time iteration's solver compiled in
+/// for it, its horizon and scalar.
+fn problem(args: &BenchArgs) -> Result<(bool, &'static str), String> {
+    let f32_flag = if args.f32 { " --f32" } else { "" };
+    match args.model.as_str() {
+        "qrbench" => {}
+        "pointmass" if args.horizon != 10 || args.f32 => {
+            return Err(format!(
+                "--model pointmass --horizon {}{f32_flag}: no solver generated for this case; \
+                 compiled in: --horizon 10 (f64)",
+                args.horizon,
+            ));
+        }
+        "pointmass" => return Ok((true, POINTMASS)),
+        other => {
+            return Err(format!(
+                "--model {other}: unknown; the benchmark problems are {MODELS}"
+            ));
+        }
+    }
+    let Some(&(_, _, solver)) = CASES
+        .iter()
+        .find(|c| c.0 == args.horizon && c.1 == args.f32)
+    else {
+        let have: Vec<String> = CASES
+            .iter()
+            .map(|c| format!("--horizon {}{}", c.0, if c.1 { " --f32" } else { "" }))
+            .collect();
+        return Err(format!(
+            "--horizon {}{f32_flag}: no solver generated for this case; compiled in: {}",
+            args.horizon,
+            have.join(", ")
+        ));
+    };
+    Ok((false, solver))
+}
+
+/// Whether the full SQP's Hessian is the exact one, and the solver then: exact where a
+/// solver generated with it is compiled in (unless `--hessian gauss-newton`), else
+/// `solver`, the real-time iteration's.
+fn hessian(
+    args: &BenchArgs,
+    pointmass: bool,
+    solver: &'static str,
+) -> Result<(bool, &'static str), String> {
     let exact_solver = EXACT_CASES
         .iter()
         .find(|c| !pointmass && !args.f32 && c.0 == args.horizon)
         .map(|c| c.1);
-    let (exact, solver) = match (args.hessian.as_deref(), exact_solver) {
-        (Some(_), _) if !args.sqp => {
-            eprintln!(
-                "error: --hessian applies to the full SQP (the real-time iteration is \
-                 Gauss-Newton): add --sqp"
-            );
-            return ExitCode::from(2);
-        }
-        (None | Some("exact"), Some(s)) if args.sqp => (true, s),
-        (None | Some("gauss-newton"), _) => (false, solver),
-        (Some("exact"), _) => {
-            eprintln!(
-                "error: --hessian exact: no solver generated with the exact Hessian for this \
-                 case; compiled in: --model qrbench --horizon 10 and --horizon 20 (f64)"
-            );
-            return ExitCode::from(2);
-        }
-        (Some(other), _) => {
-            eprintln!("error: --hessian {other}: use exact or gauss-newton");
-            return ExitCode::from(2);
-        }
-    };
-    if args.sqp_watchdog.is_some() && !(args.sqp && exact) {
-        eprintln!(
-            "error: --sqp-watchdog applies to the full SQP with the exact Hessian: add --sqp \
-             (and leave out --hessian gauss-newton)"
-        );
-        return ExitCode::from(2);
+    match (args.hessian.as_deref(), exact_solver) {
+        (Some(_), _) if !args.sqp => Err("--hessian applies to the full SQP (the real-time \
+                                          iteration is Gauss-Newton): add --sqp"
+            .into()),
+        (None | Some("exact"), Some(s)) if args.sqp => Ok((true, s)),
+        (None | Some("gauss-newton"), _) => Ok((false, solver)),
+        (Some("exact"), _) => Err("--hessian exact: no solver generated with the exact \
+                                   Hessian for this case; compiled in: --model qrbench \
+                                   --horizon 10 and --horizon 20 (f64)"
+            .into()),
+        (Some(other), _) => Err(format!("--hessian {other}: use exact or gauss-newton")),
     }
-    let over = Overrides {
-        loose,
-        warm_active_set,
-        watchdog: args.sqp_watchdog,
-    };
-    let mut prep = Vec::new();
-    let mut feed = Vec::new();
-    let mut total = Vec::new();
+}
+
+/// Every round's step times, pooled, and the last round's closed loop.
+struct Rounds {
+    prepare_us: Vec<f64>,
+    feedback_us: Vec<f64>,
+    total_us: Vec<f64>,
+    last: ClosedLoop,
+}
+
+/// Flies `args.rounds` closed loops of `case`; `None` where its solver is not compiled in
+/// (or no round was flown).
+fn fly_rounds(args: &BenchArgs, case: &Case) -> Option<Rounds> {
+    let mut prepare_us = Vec::new();
+    let mut feedback_us = Vec::new();
+    let mut total_us = Vec::new();
     let mut last = None;
     for _ in 0..args.rounds {
-        let run = if pointmass {
-            fly_pointmass(args.sqp, over)
+        let run = if case.pointmass {
+            fly_pointmass(args.sqp, case.over)
         } else {
-            let Some(run) = fly_case(args.horizon, args.f32, args.sqp, exact, over) else {
-                return ExitCode::FAILURE;
-            };
-            run
+            fly_case(args.horizon, args.f32, args.sqp, case.exact, case.over)?
         };
-        prep.extend(&run.prepare_us);
-        feed.extend(&run.feedback_us);
-        total.extend(
+        prepare_us.extend(&run.prepare_us);
+        feedback_us.extend(&run.feedback_us);
+        total_us.extend(
             run.prepare_us
                 .iter()
                 .zip(&run.feedback_us)
@@ -484,35 +547,33 @@ pub(crate) fn run(args: &BenchArgs) -> ExitCode {
         );
         last = Some(run);
     }
-    let Some(run) = last else {
-        return ExitCode::FAILURE;
-    };
-    let csv = if args.no_csv {
-        None
+    Some(Rounds {
+        prepare_us,
+        feedback_us,
+        total_us,
+        last: last?,
+    })
+}
+
+/// The CSV's path without `--csv`: `bench-out/`, the problem, `_sqp` in SQP mode.
+fn default_csv(args: &BenchArgs, pointmass: bool) -> PathBuf {
+    let sqp = if args.sqp { "_sqp" } else { "" };
+    PathBuf::from(if pointmass {
+        format!("bench-out/pointmass_f64{sqp}.csv")
     } else {
-        let path = args.csv.clone().unwrap_or_else(|| {
-            PathBuf::from(if pointmass {
-                format!(
-                    "bench-out/pointmass_f64{}.csv",
-                    if args.sqp { "_sqp" } else { "" }
-                )
-            } else {
-                format!(
-                    "bench-out/qrbench_n{}_{}{}.csv",
-                    args.horizon,
-                    if args.f32 { "f32" } else { "f64" },
-                    if args.sqp { "_sqp" } else { "" }
-                )
-            })
-        });
-        if let Err(e) = write_csv(&path, &run) {
-            eprintln!("error: {}: {e}", path.display());
-            return ExitCode::FAILURE;
-        }
-        Some(path)
-    };
+        format!(
+            "bench-out/qrbench_n{}_{}{sqp}.csv",
+            args.horizon,
+            if args.f32 { "f32" } else { "f64" },
+        )
+    })
+}
+
+/// The figures of the rounds flown.
+fn report(args: &BenchArgs, case: &Case, rounds: &Rounds, csv: Option<PathBuf>) -> Report {
+    let run = &rounds.last;
     // The distance of the final position from the target: (4, 0, 2) or (1, 0, 0).
-    let target = if pointmass {
+    let target = if case.pointmass {
         [1.0, 0.0, 0.0]
     } else {
         [4.0, 0.0, 2.0]
@@ -525,18 +586,18 @@ pub(crate) fn run(args: &BenchArgs) -> ExitCode {
             .sqrt()
     });
     let mean = |v: &[u32]| v.iter().map(|&i| f64::from(i)).sum::<f64>() / v.len().max(1) as f64;
-    let report = Report {
+    Report {
         model: args.model.clone(),
-        solver: solver.to_string(),
+        solver: case.solver.to_string(),
         horizon: args.horizon,
         scalar: if args.f32 { "f32" } else { "f64" },
         mode: if args.sqp { "sqp" } else { "rti" },
-        hessian: if exact { "exact" } else { "gauss-newton" },
+        hessian: if case.exact { "exact" } else { "gauss-newton" },
         rounds: args.rounds,
         steps: run.controls.len(),
-        prepare_us: Stats::of(&prep),
-        feedback_us: Stats::of(&feed),
-        total_us: Stats::of(&total),
+        prepare_us: Stats::of(&rounds.prepare_us),
+        feedback_us: Stats::of(&rounds.feedback_us),
+        total_us: Stats::of(&rounds.total_us),
         qp_iterations_mean: mean(&run.qp_iterations),
         qp_iterations_max: run.qp_iterations.iter().copied().max().unwrap_or(0),
         qp_interior_point_steps: run.qp_iterations.iter().filter(|&&i| i > 0).count(),
@@ -547,77 +608,71 @@ pub(crate) fn run(args: &BenchArgs) -> ExitCode {
         final_position_error_m: err,
         all_ok: run.all_ok,
         csv,
-    };
-    if args.json {
-        match serde_json::to_string(&report) {
-            Ok(s) => println!("{s}"),
-            Err(e) => {
-                eprintln!("error: JSON: {e}");
-                return ExitCode::FAILURE;
-            }
-        }
-    } else {
-        println!(
-            "{}, {solver}, {} mode: {} rounds x {} steps",
-            if pointmass { "Point mass" } else { "QR-bench" },
-            report.mode,
-            report.rounds,
-            report.steps
-        );
-        println!(
-            "{:<10} {:>10} {:>10} {:>10} {:>10}",
-            "phase [us]", "mean", "median", "p99", "max"
-        );
-        for (name, s) in [
-            ("prepare", report.prepare_us),
-            ("feedback", report.feedback_us),
-            ("total", report.total_us),
-        ] {
-            println!(
-                "{name:<10} {:>10.1} {:>10.1} {:>10.1} {:>10.1}",
-                s.mean, s.median, s.p99, s.max
-            );
-        }
-        if args.sqp {
-            println!(
-                "SQP iterations per step ({} Hessian): mean {:.2}, max {}; {} steps stopped at \
-                 the iteration limit (their iterate is kept)",
-                report.hessian,
-                report.sqp_iterations_mean,
-                report.sqp_iterations_max,
-                report.sqp_limit_steps
-            );
-        }
-        println!(
-            "QP per step{}: interior-point iterations mean {:.2}, max {} (in {} of {} steps); \
-             active-set solves mean {:.2}",
-            if args.sqp {
-                " (last QP of each step)"
-            } else {
-                ""
-            },
-            report.qp_iterations_mean,
-            report.qp_iterations_max,
-            report.qp_interior_point_steps,
-            report.steps,
-            report.qp_active_set_solves_mean,
-        );
-        println!(
-            "final position error {:.3e} m{}",
-            report.final_position_error_m,
-            if report.all_ok {
-                String::new()
-            } else {
-                "; SOME STEPS DID NOT SOLVE".to_string()
-            }
-        );
-        if let Some(p) = &report.csv {
-            println!("wrote {}", p.display());
-        }
     }
-    if report.all_ok {
-        ExitCode::SUCCESS
-    } else {
-        ExitCode::FAILURE
+}
+
+/// The figures as text: the times, the iterations, the final error, the CSV written.
+fn print_summary(args: &BenchArgs, case: &Case, report: &Report) {
+    println!(
+        "{}, {}, {} mode: {} rounds x {} steps",
+        if case.pointmass {
+            "Point mass"
+        } else {
+            "QR-bench"
+        },
+        case.solver,
+        report.mode,
+        report.rounds,
+        report.steps
+    );
+    println!(
+        "{:<10} {:>10} {:>10} {:>10} {:>10}",
+        "phase [us]", "mean", "median", "p99", "max"
+    );
+    for (name, s) in [
+        ("prepare", report.prepare_us),
+        ("feedback", report.feedback_us),
+        ("total", report.total_us),
+    ] {
+        println!(
+            "{name:<10} {:>10.1} {:>10.1} {:>10.1} {:>10.1}",
+            s.mean, s.median, s.p99, s.max
+        );
+    }
+    if args.sqp {
+        println!(
+            "SQP iterations per step ({} Hessian): mean {:.2}, max {}; {} steps stopped at \
+             the iteration limit (their iterate is kept)",
+            report.hessian,
+            report.sqp_iterations_mean,
+            report.sqp_iterations_max,
+            report.sqp_limit_steps
+        );
+    }
+    println!(
+        "QP per step{}: interior-point iterations mean {:.2}, max {} (in {} of {} steps); \
+         active-set solves mean {:.2}",
+        if args.sqp {
+            " (last QP of each step)"
+        } else {
+            ""
+        },
+        report.qp_iterations_mean,
+        report.qp_iterations_max,
+        report.qp_interior_point_steps,
+        report.steps,
+        report.qp_active_set_solves_mean,
+    );
+    println!(
+        "final position error {:.3e} m{}",
+        report.final_position_error_m,
+        if report.all_ok {
+            String::new()
+        } else {
+            "; SOME STEPS DID NOT SOLVE".to_string()
+        }
+    );
+    if let Some(p) = &report.csv {
+        println!("wrote {}", p.display());
     }
 }

@@ -1154,47 +1154,16 @@ impl<
         }
     }
 
-    /// The interior-point iteration.
+    /// The interior-point iteration: the input checked (or `prepare`'s checks and first
+    /// factorization used), the start, then a stop test and Mehrotra's predictor-corrector
+    /// step per iteration, up to the iteration limit.
     fn iterate<const NH: usize>(&mut self, qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>) -> QpInfo<T> {
-        let nan = T::ZERO;
         self.polished = false;
-        // `prepare` started the iteration and factorized its first Newton system, with these
-        // settings.
-        let pre = core::mem::replace(&mut self.prefactored, false)
-            && self.prefactor_settings == self.settings;
-        if self.condensed || pre {
-            // `prepare` checked the rest and loaded the bounds.
-            if !qp.x0.iter().all(|v| v.finite()) {
-                return self.info(QpStatus::NonFiniteInput, 0, [nan; 4]);
-            }
-        } else {
-            if !self.check_input(qp) {
-                return self.info(QpStatus::NonFiniteInput, 0, [nan; 4]);
-            }
-            match self.load_bounds(qp) {
-                Ok(()) => {}
-                Err(BoundError::TooMany) => {
-                    return self.info(QpStatus::TooManyStateBounds, 0, [nan; 4]);
-                }
-                Err(_) => return self.info(QpStatus::Infeasible, 0, [nan; 4]),
-            }
-            // Without Riccati storage every QP is condensed (the solver's dimensions allow
-            // no other inequality than control bounds): this one had no `prepare`.
-            if NR != N {
-                self.condensed = self.condense(qp);
-                if !self.condensed {
-                    return self.info(QpStatus::NumericalError, 0, [nan; 4]);
-                }
-            }
-        }
-        let m = self.rx.iter().map(|r| r.count()).sum::<usize>()
-            + self.ru.iter().map(Rows::count).sum::<usize>()
-            + self.rg.iter().map(Rows::count).sum::<usize>()
-            + self.sg.iter().map(Soft::count).sum::<usize>()
-            + self.rxn.count()
-            + self.rgn.count()
-            + self.sgn.count();
-        let m_real = T::lit(m.max(1) as f64);
+        let pre = match self.check_and_load(qp) {
+            Ok(pre) => pre,
+            Err(status) => return self.info(status, 0, [T::ZERO; 4]),
+        };
+        let m_real = T::lit(self.inequality_count().max(1) as f64);
 
         if pre {
             if let Some(x) = self.sol.x.first_mut() {
@@ -1212,9 +1181,8 @@ impl<
         let diverge = T::lit(1e12).min(T::ONE / (T::EPSILON * T::EPSILON));
         let mut res;
         // Primal infeasibility of the previous iteration and how many iterations in a row it
-        // has not decreased: a feasible problem's primal residual shrinks by (1 - alpha) every
-        // iteration; one stuck for many iterations means the constraints cannot be met.
-        let (mut prev_primal, mut stalled) = (T::INF, 0u32);
+        // has not decreased (`stop_test`).
+        let mut progress = (T::INF, 0u32);
         // The Riccati recursion's stationarity residual costs about as much as the others; it
         // is computed in the first iteration, when the others would let the iteration stop,
         // and when it ends. In between, its estimate: a step of length alpha shrinks it by
@@ -1233,70 +1201,20 @@ impl<
                 };
             }
             stat = res[0];
-            if !res.iter().all(|r| r.finite()) {
-                return self.info(QpStatus::Infeasible, iter, self.exact(qp, res));
-            }
-            let primal = res[1].max(res[2]);
-            if primal > st.tol_eq.max(st.tol_ineq) && primal >= T::lit(0.99) * prev_primal {
-                stalled += 1;
-                if stalled >= STALL_LIMIT {
-                    return self.info(QpStatus::Infeasible, iter, self.exact(qp, res));
-                }
-            } else {
-                stalled = 0;
-            }
-            prev_primal = primal;
-            if res[0] <= st.tol_stat
-                && res[1] <= st.tol_eq
-                && res[2] <= st.tol_ineq
-                && mu <= st.tol_comp
-            {
-                self.dual_valid = true;
-                return self.info(QpStatus::Solved, iter, res);
-            }
-            if self.max_multiplier() > diverge {
-                return self.info(QpStatus::Infeasible, iter, self.exact(qp, res));
+            if let Some(status) = self.stop_test(&st, &res, &mut progress, diverge) {
+                return if status == QpStatus::Solved {
+                    self.dual_valid = true;
+                    self.info(status, iter, res)
+                } else {
+                    self.info(status, iter, self.exact(qp, res))
+                };
             }
             // The first Newton system does not depend on `x0`: `prepare` may have factorized it.
             let factorized = (pre && iter == 0) || self.factorize(qp, Newton::Interior);
             if !factorized {
                 return self.info(QpStatus::NumericalError, iter, self.exact(qp, res));
             }
-            // Predictor.
-            self.newton_direction(qp, Rhs::Affine);
-            self.save_affine();
-            let alpha_aff = self.max_step(T::ONE);
-            let mu_aff = self.complementarity_after(alpha_aff) / m_real;
-            let ratio = if mu > T::ZERO { mu_aff / mu } else { T::ZERO };
-            let sigma = ratio * ratio * ratio;
-            // Corrector. Its complementarity target never goes below a tenth of the
-            // tolerance: driving slacks further down only buries them in rounding noise
-            // (in f32 that breaks the iteration), and is not needed to stop. Nor below a
-            // fraction of the stationarity residual, except for a condensed QP: there that
-            // residual holds what the Riccati recursion sees as the dynamics residual (the
-            // change of x0 above all), relative to fewer terms, and the floor only holds
-            // complementarity back while Newton steps remove it (one more iteration per QP
-            // on QR-bench); with control bounds alone the Newton systems stay well
-            // conditioned near the boundary (the random QPs against clarabel).
-            let stat_floor = if self.dense() {
-                T::ZERO
-            } else {
-                res[0] * T::lit(MU_PER_STATIONARITY)
-            };
-            let target = (sigma * mu).max(st.tol_comp * T::lit(0.1)).max(stat_floor);
-            // When the predictor is blocked almost at once, its second-order term is a poor
-            // prediction and can be huge; leaving it out (plain centering) stops the cycling
-            // Mehrotra's method is known for on such steps.
-            let weight = if alpha_aff < T::lit(0.1) {
-                T::ZERO
-            } else {
-                T::ONE
-            };
-            self.newton_direction(qp, Rhs::Corrector(target, weight));
-            let tau = T::lit(0.995);
-            let alpha = (tau * self.max_step(T::lit(1e30))).min(T::ONE);
-            self.last_alpha = alpha;
-            self.take_step(alpha);
+            let alpha = self.predictor_corrector(qp, st.tol_comp, res[0], mu, m_real);
             stat *= T::ONE - alpha;
         }
         res = self.residuals(qp);
@@ -1313,6 +1231,146 @@ impl<
         };
         self.dual_valid = status == QpStatus::Solved;
         self.info(status, st.max_iter, res)
+    }
+
+    /// The checks before the interior point ([`iterate`](Self::iterate)): after a `prepare`
+    /// (which checked the rest and loaded the bounds) only `x0`'s; else the whole input's,
+    /// with the bounds loaded and, without Riccati storage, the QP condensed. `Ok(true)`
+    /// where `prepare` started the iteration and factorized its first Newton system with the
+    /// current settings; the status to return otherwise.
+    fn check_and_load<const NH: usize>(
+        &mut self,
+        qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>,
+    ) -> Result<bool, QpStatus> {
+        let pre = core::mem::replace(&mut self.prefactored, false)
+            && self.prefactor_settings == self.settings;
+        if self.condensed || pre {
+            if !qp.x0.iter().all(|v| v.finite()) {
+                return Err(QpStatus::NonFiniteInput);
+            }
+            return Ok(pre);
+        }
+        if !self.check_input(qp) {
+            return Err(QpStatus::NonFiniteInput);
+        }
+        match self.load_bounds(qp) {
+            Ok(()) => {}
+            Err(BoundError::TooMany) => return Err(QpStatus::TooManyStateBounds),
+            Err(_) => return Err(QpStatus::Infeasible),
+        }
+        // Without Riccati storage every QP is condensed (the solver's dimensions allow no
+        // other inequality than control bounds): this one had no `prepare`.
+        if NR != N {
+            self.condensed = self.condense(qp);
+            if !self.condensed {
+                return Err(QpStatus::NumericalError);
+            }
+        }
+        Ok(pre)
+    }
+
+    /// The number of inequality sides the interior point holds (slacks and multipliers),
+    /// by which its complementarity is averaged.
+    fn inequality_count(&self) -> usize {
+        self.rx.iter().map(|r| r.count()).sum::<usize>()
+            + self.ru.iter().map(Rows::count).sum::<usize>()
+            + self.rg.iter().map(Rows::count).sum::<usize>()
+            + self.sg.iter().map(Soft::count).sum::<usize>()
+            + self.rxn.count()
+            + self.rgn.count()
+            + self.sgn.count()
+    }
+
+    /// The interior point's stop test at residuals `res` (`res[3]`: the average
+    /// complementarity): `Solved` where they meet the tolerances; `Infeasible` where one is
+    /// not finite, the primal residual above its tolerance has not decreased for
+    /// `STALL_LIMIT` iterations in a row (`progress`: the last primal residual and that
+    /// count; a feasible problem's shrinks by (1 - alpha) every iteration, one stuck for many
+    /// iterations means the constraints cannot be met), or a multiplier beyond `diverge`;
+    /// `None` to go on.
+    #[inline]
+    fn stop_test(
+        &self,
+        st: &QpSettings<T>,
+        res: &[T; 4],
+        progress: &mut (T, u32),
+        diverge: T,
+    ) -> Option<QpStatus> {
+        if !res.iter().all(|r| r.finite()) {
+            return Some(QpStatus::Infeasible);
+        }
+        let (prev_primal, stalled) = progress;
+        let primal = res[1].max(res[2]);
+        if primal > st.tol_eq.max(st.tol_ineq) && primal >= T::lit(0.99) * *prev_primal {
+            *stalled += 1;
+            if *stalled >= STALL_LIMIT {
+                return Some(QpStatus::Infeasible);
+            }
+        } else {
+            *stalled = 0;
+        }
+        *prev_primal = primal;
+        if res[0] <= st.tol_stat
+            && res[1] <= st.tol_eq
+            && res[2] <= st.tol_ineq
+            && res[3] <= st.tol_comp
+        {
+            return Some(QpStatus::Solved);
+        }
+        if self.max_multiplier() > diverge {
+            return Some(QpStatus::Infeasible);
+        }
+        None
+    }
+
+    /// Mehrotra's predictor-corrector step on the factorized Newton system, at
+    /// stationarity residual `res_stat` and average complementarity `mu` over `m_real`
+    /// inequality sides; the step length taken.
+    #[inline]
+    fn predictor_corrector<const NH: usize>(
+        &mut self,
+        qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>,
+        tol_comp: T,
+        res_stat: T,
+        mu: T,
+        m_real: T,
+    ) -> T {
+        // Predictor.
+        self.newton_direction(qp, Rhs::Affine);
+        self.save_affine();
+        let alpha_aff = self.max_step(T::ONE);
+        let mu_aff = self.complementarity_after(alpha_aff) / m_real;
+        let ratio = if mu > T::ZERO { mu_aff / mu } else { T::ZERO };
+        let sigma = ratio * ratio * ratio;
+        // Corrector. Its complementarity target never goes below a tenth of the tolerance:
+        // driving slacks further down only buries them in rounding noise (in f32 that breaks
+        // the iteration), and is not needed to stop. Nor below a fraction of the
+        // stationarity residual, except for a condensed QP: there that residual holds what
+        // the Riccati recursion sees as the dynamics residual (the change of x0 above all),
+        // relative to fewer terms, and the floor only holds complementarity back while
+        // Newton steps remove it (one more iteration per QP on QR-bench); with control
+        // bounds alone the Newton systems stay well conditioned near the boundary (the
+        // random QPs against clarabel).
+        let stat_floor = if self.dense() {
+            T::ZERO
+        } else {
+            res_stat * T::lit(MU_PER_STATIONARITY)
+        };
+        let target = (sigma * mu).max(tol_comp * T::lit(0.1)).max(stat_floor);
+        // When the predictor is blocked almost at once, its second-order term is a poor
+        // prediction and can be huge; leaving it out (plain centering) stops the cycling
+        // Mehrotra's method is known for on such steps.
+        let weight = if alpha_aff < T::lit(0.1) {
+            T::ZERO
+        } else {
+            T::ONE
+        };
+        self.newton_direction(qp, Rhs::Corrector(target, weight));
+        let tau = T::lit(0.995);
+        let alpha = (tau * self.max_step(T::lit(1e30))).min(T::ONE);
+        self.last_alpha = alpha;
+        self.take_step(alpha);
+        alpha
     }
 
     /// `res` from [`residuals`](Self::residuals) with the stationarity residual computed

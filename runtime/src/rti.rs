@@ -874,6 +874,14 @@ impl<
         self.xn += sol.xn * alpha;
     }
 
+    /// The trial trajectory of the line search is the current one.
+    fn save_trial(&mut self) {
+        self.xt = self.x;
+        self.ut = self.u;
+        self.xnt = self.xn;
+    }
+
+    /// Back to the trial trajectory of the line search.
     fn restore_trial(&mut self) {
         self.x = self.xt;
         self.u = self.ut;
@@ -1055,7 +1063,30 @@ impl<
         if !all_finite(x0) {
             return self.info(RtiStatus::NonFiniteInput, empty, 0);
         }
-        let mut last = empty;
+        let mut run = self.sqp_start(empty);
+        for it in 0..self.settings.sqp_max_iter {
+            if let Some(done) = self.sqp_iteration(&mut run, x0, it) {
+                return done;
+            }
+        }
+        if run.watch.is_some() {
+            // Steps still watched at the limit (their QPs were not Newton's, so the watchdog
+            // did not judge them): nothing got below the reference, which is kept.
+            run.returned = true;
+            self.restore_reference(x0);
+        }
+        self.sqp_info(
+            RtiStatus::MaxIterations,
+            run.last,
+            self.settings.sqp_max_iter,
+            run.returned,
+        )
+    }
+
+    /// The full SQP's state before its first iteration ([`solve_sqp`](Self::solve_sqp)):
+    /// its QPs' tolerances, whether its steps are exact-Hessian ones, nothing watched and
+    /// nothing known of the merit yet.
+    fn sqp_start(&self, empty: QpInfo<T>) -> SqpRun<T> {
         // The step test needs accurate steps: at least the QP solver's own tolerances.
         let mut tight = self.settings.qp;
         tight.tol_stat = tight.tol_stat.min(T::DEFAULT_TOL);
@@ -1069,7 +1100,6 @@ impl<
         // the polish does not handle: soft rows, the Riccati recursion in a solver with
         // condensing storage) is solved again to `tight`, and the rest of this solve goes
         // straight to `tight`.
-        let mut loose = self.settings.sqp_loose_qps && !self.any_soft;
         let mut loose_settings = tight;
         let lt = T::lit(SQP_LOOSE_QP_TOL);
         loose_settings.tol_stat = lt.max(tight.tol_stat);
@@ -1078,194 +1108,275 @@ impl<
         loose_settings.tol_comp = lt.max(tight.tol_comp);
         loose_settings.polish = false;
         let exact = M::EXACT_HESSIAN && NH == N && self.settings.sqp_exact_hessian;
-        let mut gauss_newton_next = false;
-        let mut watchdog_on = exact && self.settings.sqp_watchdog > 0;
-        // The merit's parts at the watchdog's reference and the steps watched since.
-        let mut watch: Option<((T, T), u32)> = None;
-        let mut returned = false;
-        // The merit's parts (cost, defects) at the current iterate, where known.
-        let mut here: Option<(T, T)> = None;
-        for it in 0..self.settings.sqp_max_iter {
-            self.linearize();
-            let x_lin0 = self.x.first().copied().unwrap_or(*x0);
-            self.qp.x0 = x0 - x_lin0;
-            // Converged on the KKT conditions with the last QP's multipliers: done without
-            // the QP that would only confirm it (its step under `sqp_tol`).
-            let kkt_tol = self.settings.sqp_kkt_tol;
-            if it > 0 && kkt_tol > T::ZERO && self.kkt_residual().is_some_and(|r| r <= kkt_tol) {
-                self.plan = self.u;
-                self.plan_age = 0;
-                return self.sqp_info(RtiStatus::Ok, last, it, returned);
-            }
-            // A Newton step: the QP's Hessian is the Lagrangian's (`curved`: with the
-            // dynamics' curvature added, not zero).
-            let hessian = if exact && !gauss_newton_next {
-                self.add_dynamics_curvature()
-            } else {
-                None
-            };
-            let mut newton = hessian.is_some();
-            let mut curved = hessian == Some(true);
-            gauss_newton_next = false;
-            let loose_before = loose;
-            last = self.solve_sqp_qp(&mut loose, &loose_settings, &tight);
-            if curved && (last.status != QpStatus::Solved || !self.step_is_finite()) {
-                // The QP with the curvature is not convex where it must be (or broke down):
-                // this iteration with Gauss-Newton's Hessian, which is.
-                self.linearize();
-                (newton, curved) = (false, false);
-                loose = loose_before;
-                last = self.solve_sqp_qp(&mut loose, &loose_settings, &tight);
-            }
-            if last.status != QpStatus::Solved || !self.step_is_finite() {
-                return self.sqp_info(RtiStatus::UsedPreviousPlan, last, it + 1, returned);
-            }
-            let sol = self.solver.solution();
-            let mut step = sol.xn.amax();
-            let mut nu = T::ONE;
-            for k in 0..N {
-                step = step.max(sol.x[k].amax()).max(sol.u[k].amax());
-                nu = nu.max(sol.pi[k].amax() * T::lit(2.0));
-            }
-            // The first state is pinned to x0 exactly; the line search moves the rest.
+        SqpRun {
+            tight,
+            loose_settings,
+            loose: self.settings.sqp_loose_qps && !self.any_soft,
+            exact,
+            gauss_newton_next: false,
+            watchdog_on: exact && self.settings.sqp_watchdog > 0,
+            watch: None,
+            returned: false,
+            here: None,
+            last: empty,
+        }
+    }
+
+    /// Iteration `it` of the full SQP ([`solve_sqp`](Self::solve_sqp)): linearize, stop on
+    /// the KKT conditions, solve the QP, stop on a short step, else move along the step (the
+    /// watchdog's decision for a watched Newton step, the line search otherwise). `Some`
+    /// with the outcome where the solve ends here.
+    fn sqp_iteration(
+        &mut self,
+        run: &mut SqpRun<T>,
+        x0: &SVector<T, NX>,
+        it: u32,
+    ) -> Option<RtiInfo<T>> {
+        self.linearize();
+        let x_lin0 = self.x.first().copied().unwrap_or(*x0);
+        self.qp.x0 = x0 - x_lin0;
+        // Converged on the KKT conditions with the last QP's multipliers: done without the
+        // QP that would only confirm it (its step under `sqp_tol`).
+        let kkt_tol = self.settings.sqp_kkt_tol;
+        if it > 0 && kkt_tol > T::ZERO && self.kkt_residual().is_some_and(|r| r <= kkt_tol) {
+            return Some(self.sqp_converged(run, it));
+        }
+        let Some(kind) = self.sqp_step(run) else {
+            return Some(self.sqp_info(
+                RtiStatus::UsedPreviousPlan,
+                run.last,
+                it + 1,
+                run.returned,
+            ));
+        };
+        let (step, nu) = self.step_length_and_nu();
+        // The first state is pinned to x0 exactly; the line search moves the rest.
+        self.pin_x0(x0);
+        if step <= self.settings.sqp_tol {
+            // Converged: the step is below the tolerance; taken whole, without a search.
+            self.apply_step(T::ONE);
             self.pin_x0(x0);
-            if step <= self.settings.sqp_tol {
-                // Converged: the step is below the tolerance; taken whole, without a search.
-                self.apply_step(T::ONE);
-                self.pin_x0(x0);
-                self.plan = self.u;
-                self.plan_age = 0;
-                return self.sqp_info(RtiStatus::Ok, last, it + 1, returned);
-            }
-            // The merit's parts at the current iterate: those of the step accepted last (the
-            // pinned first state has not moved since), else evaluated.
-            let parts0 = match here.take() {
-                Some(parts) => parts,
-                None => self.merit_parts(),
+            return Some(self.sqp_converged(run, it + 1));
+        }
+        // The merit's parts at the current iterate: those of the step accepted last (the
+        // pinned first state has not moved since), else evaluated.
+        let parts = match run.here.take() {
+            Some(parts) => parts,
+            None => self.merit_parts(),
+        };
+        let at = MeritAt {
+            nu,
+            parts,
+            phi: parts.0 + nu * parts.1,
+        };
+        self.save_trial();
+        if kind.newton && run.watchdog_on && self.watchdog(run, x0, it, &at) {
+            return None;
+        }
+        self.search_and_step(run, x0, &at, kind);
+        None
+    }
+
+    /// The full SQP's end at a converged iterate after `iterations` iterations: its controls
+    /// are the plan.
+    fn sqp_converged(&mut self, run: &SqpRun<T>, iterations: u32) -> RtiInfo<T> {
+        self.plan = self.u;
+        self.plan_age = 0;
+        self.sqp_info(RtiStatus::Ok, run.last, iterations, run.returned)
+    }
+
+    /// The QP step of an SQP iteration: Newton's where the Hessian is the Lagrangian's
+    /// (exact steps, but not right after an exact step that found no decrease), with
+    /// Gauss-Newton's Hessian where the one with the dynamics' curvature fails. `None` where
+    /// the QP is not solved or its step is not finite.
+    fn sqp_step(&mut self, run: &mut SqpRun<T>) -> Option<SqpStep> {
+        // A Newton step: the QP's Hessian is the Lagrangian's (`curved`: with the dynamics'
+        // curvature added, not zero).
+        let hessian = if run.exact && !run.gauss_newton_next {
+            self.add_dynamics_curvature()
+        } else {
+            None
+        };
+        let mut kind = SqpStep {
+            newton: hessian.is_some(),
+            curved: hessian == Some(true),
+        };
+        run.gauss_newton_next = false;
+        let loose_before = run.loose;
+        run.last = self.solve_sqp_qp(&mut run.loose, &run.loose_settings, &run.tight);
+        if kind.curved && (run.last.status != QpStatus::Solved || !self.step_is_finite()) {
+            // The QP with the curvature is not convex where it must be (or broke down): this
+            // iteration with Gauss-Newton's Hessian, which is.
+            self.linearize();
+            kind = SqpStep {
+                newton: false,
+                curved: false,
             };
-            let phi0 = parts0.0 + nu * parts0.1;
-            self.xt = self.x;
-            self.ut = self.u;
-            self.xnt = self.xn;
-            if newton && watchdog_on {
-                // The watchdog (Chamberlain, Powell, Lemarechal and Pedersen, 1982): Newton's
-                // step is taken whole where it decreases the merit below the reference's (the
-                // current iterate's, or while steps are watched, the iterate before the first
-                // of them); up to `sqp_watchdog` steps in a row are taken whole without that
-                // (not in the last iteration, which could not come back), and if none of them
-                // gets there, the iteration goes back to the reference and searches
-                // monotonically from there on. Newton's whole steps converge where the
-                // monotone search crawls: from the hover guess, QR-bench A's first step takes
-                // 30 iterations with it (most of them short steps), 7 with the watchdog
-                // (`mpcc bench --sqp [--sqp-watchdog 0]`: the most iterations in a step).
-                self.apply_step(T::ONE);
-                self.pin_x0(x0);
-                let parts = self.merit_parts();
-                let phi = parts.0 + nu * parts.1;
-                let (reference, phi_ref) = match watch {
-                    Some((r, _)) => (r, r.0 + nu * r.1),
-                    None => (parts0, phi0),
-                };
-                if phi.finite() && phi < phi_ref {
-                    // Below the reference: accepted, and the watch (if any) ends.
-                    watch = None;
-                    here = Some(parts);
-                    continue;
-                }
-                let relaxed = watch.map_or(0, |(_, n)| n);
-                let last_iteration = it + 1 >= self.settings.sqp_max_iter;
-                if phi.finite() && relaxed < self.settings.sqp_watchdog && !last_iteration {
-                    // Not below it: taken anyway, the iterate before it kept as the
-                    // reference (the first such step's).
-                    if watch.is_none() {
-                        // `NH = N` here (`exact`): the whole trajectory.
-                        for (w, t) in self.xw.iter_mut().zip(&self.xt) {
-                            *w = *t;
-                        }
-                        for (w, t) in self.uw.iter_mut().zip(&self.ut) {
-                            *w = *t;
-                        }
-                        self.xnw = self.xnt;
-                    }
-                    watch = Some((reference, relaxed + 1));
-                    here = Some(parts);
-                    continue;
-                }
-                if watch.is_some() {
-                    // The watched steps did not bring the merit below the reference's: back
-                    // to the reference, and monotone searches for the rest of this solve.
-                    watchdog_on = false;
-                    returned = true;
-                    self.restore_reference(x0);
-                    watch = None;
-                    here = Some(reference);
-                    continue;
-                }
-                // Nothing watched: this step searches monotonically.
-                self.restore_trial();
+            run.loose = loose_before;
+            run.last = self.solve_sqp_qp(&mut run.loose, &run.loose_settings, &run.tight);
+        }
+        (run.last.status == QpStatus::Solved && self.step_is_finite()).then_some(kind)
+    }
+
+    /// The largest entry of the last QP's step, and the merit function's weight of the
+    /// dynamics defects, `nu`: twice the largest dynamics multiplier, at least one.
+    fn step_length_and_nu(&self) -> (T, T) {
+        let sol = self.solver.solution();
+        let mut step = sol.xn.amax();
+        let mut nu = T::ONE;
+        for k in 0..N {
+            step = step.max(sol.x[k].amax()).max(sol.u[k].amax());
+            nu = nu.max(sol.pi[k].amax() * T::lit(2.0));
+        }
+        (step, nu)
+    }
+
+    /// The watchdog's decision on a Newton step from the iterate saved as the trial
+    /// (Chamberlain, Powell, Lemarechal and Pedersen, 1982): Newton's step is taken whole
+    /// where it decreases the merit below the reference's (the current iterate's, or while
+    /// steps are watched, the iterate before the first of them); up to `sqp_watchdog` steps
+    /// in a row are taken whole without that (not in the last iteration, which could not
+    /// come back), and if none of them gets there, the iteration goes back to the reference
+    /// and searches monotonically from there on. Newton's whole steps converge where the
+    /// monotone search crawls: from the hover guess, QR-bench A's first step takes 30
+    /// iterations with it (most of them short steps), 7 with the watchdog (`mpcc bench --sqp
+    /// [--sqp-watchdog 0]`: the most iterations in a step). `true` where it decided (the
+    /// iteration is over), `false` where this step searches monotonically (the trajectory
+    /// back at the trial).
+    fn watchdog(
+        &mut self,
+        run: &mut SqpRun<T>,
+        x0: &SVector<T, NX>,
+        it: u32,
+        at: &MeritAt<T>,
+    ) -> bool {
+        self.apply_step(T::ONE);
+        self.pin_x0(x0);
+        let parts = self.merit_parts();
+        let phi = parts.0 + at.nu * parts.1;
+        let (reference, phi_ref) = match run.watch {
+            Some((r, _)) => (r, r.0 + at.nu * r.1),
+            None => (at.parts, at.phi),
+        };
+        if phi.finite() && phi < phi_ref {
+            // Below the reference: accepted, and the watch (if any) ends.
+            run.watch = None;
+            run.here = Some(parts);
+            return true;
+        }
+        let relaxed = run.watch.map_or(0, |(_, n)| n);
+        let last_iteration = it + 1 >= self.settings.sqp_max_iter;
+        if phi.finite() && relaxed < self.settings.sqp_watchdog && !last_iteration {
+            // Not below it: taken anyway, the iterate before it kept as the reference (the
+            // first such step's).
+            if run.watch.is_none() {
+                self.keep_trial_as_reference();
             }
-            // Backtracking that keeps halving while the merit keeps improving: it takes the
-            // full step where that is best and damps the overshoot of Gauss-Newton steps that
-            // oscillate (a plain Armijo test accepts those and converges slowly). An
-            // exact-Hessian step that decreases the merit is taken whole (Newton's steps do
-            // not oscillate so; near the solution the full step is the best).
-            let mut best = (T::ZERO, phi0, parts0);
-            let mut alpha = T::ONE;
-            for _ in 0..MAX_HALVINGS {
-                self.restore_trial();
-                self.apply_step(alpha);
-                self.pin_x0(x0);
-                let parts = self.merit_parts();
-                let phi = parts.0 + nu * parts.1;
-                if phi.finite() && phi < best.1 {
-                    best = (alpha, phi, parts);
-                    if newton {
-                        break;
-                    }
-                } else if best.0 > T::ZERO {
-                    break;
-                }
-                alpha *= T::lit(0.5);
-            }
-            if curved && best.0 == T::ZERO {
+            run.watch = Some((reference, relaxed + 1));
+            run.here = Some(parts);
+            return true;
+        }
+        if run.watch.is_some() {
+            // The watched steps did not bring the merit below the reference's: back to the
+            // reference, and monotone searches for the rest of this solve.
+            run.watchdog_on = false;
+            run.returned = true;
+            self.restore_reference(x0);
+            run.watch = None;
+            run.here = Some(reference);
+            return true;
+        }
+        // Nothing watched: this step searches monotonically.
+        self.restore_trial();
+        false
+    }
+
+    /// The trial (the iterate before a watched step) becomes the watchdog's reference
+    /// (`NH = N` there, [`watchdog`](Self::watchdog): the whole trajectory).
+    fn keep_trial_as_reference(&mut self) {
+        for (w, t) in self.xw.iter_mut().zip(&self.xt) {
+            *w = *t;
+        }
+        for (w, t) in self.uw.iter_mut().zip(&self.ut) {
+            *w = *t;
+        }
+        self.xnw = self.xnt;
+    }
+
+    /// The line search along the last QP's step from the trial
+    /// ([`line_search`](Self::line_search)) and the move to the step length it chose; an
+    /// exact-Hessian step without any decrease stays at the trial instead and has the next
+    /// iteration take Gauss-Newton's Hessian.
+    fn search_and_step(
+        &mut self,
+        run: &mut SqpRun<T>,
+        x0: &SVector<T, NX>,
+        at: &MeritAt<T>,
+        kind: SqpStep,
+    ) {
+        let alpha = match self.line_search(x0, at, kind.newton) {
+            Search::NoDecrease(_) if kind.curved => {
                 // No decrease along the exact-Hessian step (not a descent direction of the
-                // merit function where the Lagrangian is not convex): stay, and take the next
-                // iteration with Gauss-Newton's Hessian.
+                // merit function where the Lagrangian is not convex): stay, and take the
+                // next iteration with Gauss-Newton's Hessian.
                 self.restore_trial();
-                here = Some(parts0);
-                gauss_newton_next = true;
-                continue;
+                run.here = Some(at.parts);
+                run.gauss_newton_next = true;
+                return;
             }
-            // No improvement at all (converged to rounding, or a poor direction): take the
-            // smallest step tried, so the iteration cannot stall on a stale linearization.
-            let alpha = if best.0 > T::ZERO {
-                here = Some(best.2);
+            Search::Decrease(best) => {
+                run.here = Some(best.parts);
                 // A watch ends where a searched step, too, gets below its reference.
-                if let Some(((c, d), _)) = watch
-                    && best.1 < c + nu * d
+                if let Some(((c, d), _)) = run.watch
+                    && best.phi < c + at.nu * d
                 {
-                    watch = None;
+                    run.watch = None;
                 }
-                best.0
-            } else {
-                alpha * T::lit(2.0)
-            };
+                best.alpha
+            }
+            // No improvement at all (converged to rounding, or a poor direction): the
+            // smallest step tried, so the iteration cannot stall on a stale linearization.
+            Search::NoDecrease(shortest) => shortest,
+        };
+        self.restore_trial();
+        self.apply_step(alpha);
+        self.pin_x0(x0);
+    }
+
+    /// Backtracking from the trial along the last QP's step that keeps halving while the
+    /// merit keeps improving: it takes the full step where that is best and damps the
+    /// overshoot of Gauss-Newton steps that oscillate (a plain Armijo test accepts those and
+    /// converges slowly). An exact-Hessian step (`newton`) that decreases the merit is taken
+    /// whole (Newton's steps do not oscillate so; near the solution the full step is the
+    /// best). The trajectory is left at the last step tried.
+    fn line_search(&mut self, x0: &SVector<T, NX>, at: &MeritAt<T>, newton: bool) -> Search<T> {
+        let mut best = SearchPoint {
+            alpha: T::ZERO,
+            phi: at.phi,
+            parts: at.parts,
+        };
+        let mut alpha = T::ONE;
+        for _ in 0..MAX_HALVINGS {
             self.restore_trial();
             self.apply_step(alpha);
             self.pin_x0(x0);
+            let parts = self.merit_parts();
+            let phi = parts.0 + at.nu * parts.1;
+            if phi.finite() && phi < best.phi {
+                best = SearchPoint { alpha, phi, parts };
+                if newton {
+                    break;
+                }
+            } else if best.alpha > T::ZERO {
+                break;
+            }
+            alpha *= T::lit(0.5);
         }
-        if watch.is_some() {
-            // Steps still watched at the limit (their QPs were not Newton's, so the watchdog
-            // did not judge them): nothing got below the reference, which is kept.
-            returned = true;
-            self.restore_reference(x0);
+        if best.alpha > T::ZERO {
+            Search::Decrease(best)
+        } else {
+            Search::NoDecrease(alpha * T::lit(2.0))
         }
-        self.sqp_info(
-            RtiStatus::MaxIterations,
-            last,
-            self.settings.sqp_max_iter,
-            returned,
-        )
     }
 
     /// `x_0 = x0`: the trajectory's first state is the measured one.
@@ -1307,6 +1418,65 @@ impl<
 /// On QR-bench's QPs the polish lands on the exact solution from it with 4 interior-point
 /// iterations instead of 7 (`mpcc-condensed-polished` in `benches/runtime.rs`).
 const SQP_LOOSE_QP_TOL: f64 = 1e-3;
+
+/// The full SQP's state from one iteration to the next ([`Rti::solve_sqp`]).
+struct SqpRun<T> {
+    /// Every QP to at least the QP solver's own tolerances (and the polish's).
+    tight: QpSettings<T>,
+    /// The interior point's tolerances before the polish, with `loose`.
+    loose_settings: QpSettings<T>,
+    /// The QPs loosely by the interior point, then polished; off for the rest of the solve
+    /// once a polish is refused.
+    loose: bool,
+    /// Exact-Hessian steps ([`RtiSettings::sqp_exact_hessian`], where the model has the
+    /// dynamics' Hessian and a Hessian per stage).
+    exact: bool,
+    /// The next iteration with Gauss-Newton's Hessian: the last exact step found no decrease.
+    gauss_newton_next: bool,
+    /// The watchdog judges Newton's steps (off once it has gone back to its reference).
+    watchdog_on: bool,
+    /// The merit's parts at the watchdog's reference and the steps watched since.
+    watch: Option<((T, T), u32)>,
+    /// The watchdog went back to its reference.
+    returned: bool,
+    /// The merit's parts (cost, defects) at the current iterate, where known.
+    here: Option<(T, T)>,
+    /// The last QP's outcome.
+    last: QpInfo<T>,
+}
+
+/// Which Hessian an SQP step's QP had ([`Rti::solve_sqp`]).
+#[derive(Clone, Copy)]
+struct SqpStep {
+    /// The Lagrangian's: a Newton step.
+    newton: bool,
+    /// With the dynamics' curvature added (not zero).
+    curved: bool,
+}
+
+/// The merit function at the current iterate of the full SQP: its weight of the dynamics
+/// defects `nu`, its parts (cost, defects) and its value `phi`.
+struct MeritAt<T> {
+    nu: T,
+    parts: (T, T),
+    phi: T,
+}
+
+/// A point of the full SQP's line search: its step length, merit and the merit's parts.
+#[derive(Clone, Copy)]
+struct SearchPoint<T> {
+    alpha: T,
+    phi: T,
+    parts: (T, T),
+}
+
+/// What the full SQP's line search found.
+enum Search<T> {
+    /// The best step tried, which decreases the merit.
+    Decrease(SearchPoint<T>),
+    /// No step tried decreased the merit; the shortest step tried.
+    NoDecrease(T),
+}
 
 /// `out = m / 2 + m' / 2`, entry by entry (no temporaries: a Cortex-M4F's set-up took 3.5 KB
 /// of stack for them); whether an entry changed (`!=`).

@@ -159,167 +159,194 @@ pub(crate) const FUNCTIONS: &str = "sin cos tan asin acos atan exp log sqrt abs 
     square atan2 pow min max dot cross norm norm2 sum hadamard quat_mul quat_conj quat_rotate \
     quat_to_rot rot_x rot_y rot_z euler_zyx skew diag eye zeros mat transpose";
 
-/// Calls a built-in function.
+/// Calls a built-in function: the first family that knows `name` answers.
 pub(crate) fn call<'g>(g: &'g Graph, name: &str, args: &[Val<'g>]) -> Result<Val<'g>, String> {
-    let unary: Option<fn(Expr<'g>) -> Expr<'g>> = match name {
-        "sin" => Some(Expr::sin),
-        "cos" => Some(Expr::cos),
-        "tan" => Some(Expr::tan),
-        "asin" => Some(Expr::asin),
-        "acos" => Some(Expr::acos),
-        "atan" => Some(Expr::atan),
-        "exp" => Some(Expr::exp),
-        "log" => Some(Expr::ln),
-        "sqrt" => Some(Expr::sqrt),
-        "abs" => Some(Expr::abs),
-        "tanh" => Some(Expr::tanh),
-        "sign" => Some(Expr::sign),
-        "square" => Some(Expr::square),
-        _ => None,
+    unary(name, args)
+        .or_else(|| binary(name, args))
+        .or_else(|| vectors(g, name, args))
+        .or_else(|| quaternions(name, args))
+        .or_else(|| rotations(name, args))
+        .or_else(|| constructors(g, name, args))
+        .unwrap_or_else(|| {
+            Err(format!(
+                "unknown function `{name}`; the built-in functions are: {FUNCTIONS}"
+            ))
+        })
+}
+
+/// The message of a linear-algebra error.
+fn le(e: crate::DslError) -> String {
+    e.to_string()
+}
+
+/// A built-in function's answer: `None` where its family does not know the name.
+type Answer<'g> = Option<Result<Val<'g>, String>>;
+
+/// The element-wise functions of one argument.
+fn unary<'g>(name: &str, args: &[Val<'g>]) -> Answer<'g> {
+    let f: fn(Expr<'g>) -> Expr<'g> = match name {
+        "sin" => Expr::sin,
+        "cos" => Expr::cos,
+        "tan" => Expr::tan,
+        "asin" => Expr::asin,
+        "acos" => Expr::acos,
+        "atan" => Expr::atan,
+        "exp" => Expr::exp,
+        "log" => Expr::ln,
+        "sqrt" => Expr::sqrt,
+        "abs" => Expr::abs,
+        "tanh" => Expr::tanh,
+        "sign" => Expr::sign,
+        "square" => Expr::square,
+        _ => return None,
     };
-    if let Some(f) = unary {
-        count(name, args, 1)?;
-        return Ok(args[0].map(&f));
-    }
-    let le = |e: crate::DslError| e.to_string();
-    match name {
-        "atan2" => {
-            count(name, args, 2)?;
-            zip(name, &args[0], &args[1], |y, x| y.atan2(x))
-        }
-        "pow" => {
-            count(name, args, 2)?;
-            zip(name, &args[0], &args[1], |a, b| a.pow(b))
-        }
-        "min" => {
-            count(name, args, 2)?;
-            zip(name, &args[0], &args[1], |a, b| a.min(b))
-        }
-        "max" => {
-            count(name, args, 2)?;
-            zip(name, &args[0], &args[1], |a, b| a.max(b))
-        }
-        "hadamard" => {
-            count(name, args, 2)?;
-            zip(name, &args[0], &args[1], |a, b| a * b)
-        }
-        "dot" => {
-            count(name, args, 2)?;
+    Some(count(name, args, 1).map(|()| args[0].map(&f)))
+}
+
+/// The element-wise functions of two arguments (with scalar broadcasting).
+fn binary<'g>(name: &str, args: &[Val<'g>]) -> Answer<'g> {
+    let f: fn(Expr<'g>, Expr<'g>) -> Expr<'g> = match name {
+        "atan2" => |y, x| y.atan2(x),
+        "pow" => |a, b| a.pow(b),
+        "min" => |a, b| a.min(b),
+        "max" => |a, b| a.max(b),
+        "hadamard" => |a, b| a * b,
+        _ => return None,
+    };
+    Some(count(name, args, 2).and_then(|()| zip(name, &args[0], &args[1], f)))
+}
+
+/// The functions of vectors: products, norms and sums.
+fn vectors<'g>(g: &'g Graph, name: &str, args: &[Val<'g>]) -> Answer<'g> {
+    Some(match name {
+        "dot" => count(name, args, 2).and_then(|()| {
             linalg::dot(&vector(name, 0, &args[0])?, &vector(name, 1, &args[1])?)
                 .map(Val::S)
                 .map_err(le)
-        }
-        "cross" => {
-            count(name, args, 2)?;
+        }),
+        "cross" => count(name, args, 2).and_then(|()| {
             linalg::cross(&vector(name, 0, &args[0])?, &vector(name, 1, &args[1])?)
                 .map(Val::V)
                 .map_err(le)
-        }
-        "norm" | "norm2" | "sum" => {
-            count(name, args, 1)?;
-            let v = vector(name, 0, &args[0])?;
-            if v.is_empty() {
-                return Err(format!("{name}: the vector is empty"));
-            }
-            Ok(Val::S(match name {
-                "norm" => linalg::norm(&v).map_err(le)?,
-                "norm2" => linalg::norm_squared(&v).map_err(le)?,
-                _ => linalg::sum(v.iter().copied()).unwrap_or_else(|| g.zero()),
-            }))
-        }
-        "quat_mul" => {
-            count(name, args, 2)?;
-            linalg::quat_mul(&vector(name, 0, &args[0])?, &vector(name, 1, &args[1])?)
-                .map(Val::V)
-                .map_err(le)
-        }
-        "quat_conj" => {
-            count(name, args, 1)?;
+        }),
+        "norm" | "norm2" | "sum" => reduction(g, name, args),
+        _ => return None,
+    })
+}
+
+/// `norm`, `norm2` and `sum` of a non-empty vector.
+fn reduction<'g>(g: &'g Graph, name: &str, args: &[Val<'g>]) -> Result<Val<'g>, String> {
+    count(name, args, 1)?;
+    let v = vector(name, 0, &args[0])?;
+    if v.is_empty() {
+        return Err(format!("{name}: the vector is empty"));
+    }
+    Ok(Val::S(match name {
+        "norm" => linalg::norm(&v).map_err(le)?,
+        "norm2" => linalg::norm_squared(&v).map_err(le)?,
+        _ => linalg::sum(v.iter().copied()).unwrap_or_else(|| g.zero()),
+    }))
+}
+
+/// The quaternions' functions (`w, x, y, z` vectors).
+fn quaternions<'g>(name: &str, args: &[Val<'g>]) -> Answer<'g> {
+    let two = |f: fn(&[Expr<'g>], &[Expr<'g>]) -> crate::Result<Vector<'g>>| {
+        count(name, args, 2)?;
+        f(&vector(name, 0, &args[0])?, &vector(name, 1, &args[1])?)
+            .map(Val::V)
+            .map_err(le)
+    };
+    Some(match name {
+        "quat_mul" => two(linalg::quat_mul),
+        "quat_rotate" => two(linalg::quat_rotate),
+        "quat_conj" => count(name, args, 1).and_then(|()| {
             linalg::quat_conj(&vector(name, 0, &args[0])?)
                 .map(Val::V)
                 .map_err(le)
-        }
-        "quat_rotate" => {
-            count(name, args, 2)?;
-            linalg::quat_rotate(&vector(name, 0, &args[0])?, &vector(name, 1, &args[1])?)
-                .map(Val::V)
-                .map_err(le)
-        }
-        "quat_to_rot" => {
-            count(name, args, 1)?;
+        }),
+        "quat_to_rot" => count(name, args, 1).and_then(|()| {
             linalg::quat_to_rotation(&vector(name, 0, &args[0])?)
                 .map(Val::M)
                 .map_err(le)
-        }
-        "rot_x" | "rot_y" | "rot_z" => {
-            count(name, args, 1)?;
-            let a = scalar(name, 0, &args[0])?;
-            Ok(Val::M(match name {
-                "rot_x" => linalg::rot_x(a),
-                "rot_y" => linalg::rot_y(a),
-                _ => linalg::rot_z(a),
-            }))
-        }
-        "euler_zyx" => {
-            count(name, args, 3)?;
+        }),
+        _ => return None,
+    })
+}
+
+/// The rotation matrices about an axis and of Euler angles, and the cross-product matrix.
+fn rotations<'g>(name: &str, args: &[Val<'g>]) -> Answer<'g> {
+    let about = |f: fn(Expr<'g>) -> Matrix<'g>| {
+        count(name, args, 1)?;
+        Ok(Val::M(f(scalar(name, 0, &args[0])?)))
+    };
+    Some(match name {
+        "rot_x" => about(linalg::rot_x),
+        "rot_y" => about(linalg::rot_y),
+        "rot_z" => about(linalg::rot_z),
+        "euler_zyx" => count(name, args, 3).and_then(|()| {
             Ok(Val::M(linalg::euler_zyx_to_rotation(
                 scalar(name, 0, &args[0])?,
                 scalar(name, 1, &args[1])?,
                 scalar(name, 2, &args[2])?,
             )))
-        }
-        "skew" => {
-            count(name, args, 1)?;
+        }),
+        "skew" => count(name, args, 1).and_then(|()| {
             linalg::skew(&vector(name, 0, &args[0])?)
                 .map(Val::M)
                 .map_err(le)
-        }
-        "diag" => {
-            // diag(v) or diag(a, b, c, ...): scalars and vectors are concatenated.
-            let mut d = Vec::new();
-            for (i, a) in args.iter().enumerate() {
-                d.extend(vector(name, i, a)?.iter().copied());
-            }
-            if d.is_empty() || d.len() > MAX_MATRIX_DIM {
-                return Err(format!(
-                    "diag: needs between 1 and {MAX_MATRIX_DIM} entries"
-                ));
-            }
-            Ok(Val::M(Matrix::diag(g, &d)))
-        }
-        "eye" => {
-            count(name, args, 1)?;
+        }),
+        _ => return None,
+    })
+}
+
+/// The constructors (`diag`, `eye`, `zeros`, `mat`) and `transpose`.
+fn constructors<'g>(g: &'g Graph, name: &str, args: &[Val<'g>]) -> Answer<'g> {
+    Some(match name {
+        "diag" => diag(g, name, args),
+        "eye" => count(name, args, 1).and_then(|()| {
             let n = dim(name, scalar(name, 0, &args[0])?)?;
             if n > MAX_MATRIX_DIM {
                 return Err(format!("eye: at most {MAX_MATRIX_DIM} rows"));
             }
             Ok(Val::M(Matrix::identity(g, n)))
-        }
-        "zeros" => {
-            count(name, args, 1)?;
+        }),
+        "zeros" => count(name, args, 1).and_then(|()| {
             let n = dim(name, scalar(name, 0, &args[0])?)?;
             Ok(Val::V(Vector::zeros(g, n)))
-        }
-        "mat" => {
-            // mat(row0, row1, ...): rows are vectors of equal length.
-            let rows: Vec<Vector<'g>> = args
-                .iter()
-                .enumerate()
-                .map(|(i, a)| vector(name, i, a))
-                .collect::<Result<_, _>>()?;
-            if rows.is_empty() || rows.len() > MAX_MATRIX_DIM || rows[0].len() > MAX_MATRIX_DIM {
-                return Err(format!(
-                    "mat: give between 1 and {MAX_MATRIX_DIM} rows and columns"
-                ));
-            }
-            Matrix::from_rows(&rows).map(Val::M).map_err(le)
-        }
+        }),
+        "mat" => mat(name, args),
         "transpose" => {
-            count(name, args, 1)?;
-            Ok(Val::M(matrix(name, 0, &args[0])?.transpose()))
+            count(name, args, 1).and_then(|()| Ok(Val::M(matrix(name, 0, &args[0])?.transpose())))
         }
-        _ => Err(format!(
-            "unknown function `{name}`; the built-in functions are: {FUNCTIONS}"
-        )),
+        _ => return None,
+    })
+}
+
+/// `diag(v)` or `diag(a, b, c, ...)`: scalars and vectors are concatenated.
+fn diag<'g>(g: &'g Graph, name: &str, args: &[Val<'g>]) -> Result<Val<'g>, String> {
+    let mut d = Vec::new();
+    for (i, a) in args.iter().enumerate() {
+        d.extend(vector(name, i, a)?.iter().copied());
     }
+    if d.is_empty() || d.len() > MAX_MATRIX_DIM {
+        return Err(format!(
+            "diag: needs between 1 and {MAX_MATRIX_DIM} entries"
+        ));
+    }
+    Ok(Val::M(Matrix::diag(g, &d)))
+}
+
+/// `mat(row0, row1, ...)`: rows are vectors of equal length.
+fn mat<'g>(name: &str, args: &[Val<'g>]) -> Result<Val<'g>, String> {
+    let rows: Vec<Vector<'g>> = args
+        .iter()
+        .enumerate()
+        .map(|(i, a)| vector(name, i, a))
+        .collect::<Result<_, _>>()?;
+    if rows.is_empty() || rows.len() > MAX_MATRIX_DIM || rows[0].len() > MAX_MATRIX_DIM {
+        return Err(format!(
+            "mat: give between 1 and {MAX_MATRIX_DIM} rows and columns"
+        ));
+    }
+    Matrix::from_rows(&rows).map(Val::M).map_err(le)
 }

@@ -361,208 +361,41 @@ fn names(vars: &[super::Variable<'_>]) -> Vec<String> {
         .collect()
 }
 
+/// The roles a path term's expressions may depend on.
+const PATH_ROLES: [Role; 4] = [
+    Role::State,
+    Role::Control,
+    Role::StageParam,
+    Role::GlobalParam,
+];
+
+/// The roles a terminal term's expressions may depend on, and why no other.
+const TERMINAL_ROLES: [Role; 3] = [Role::State, Role::StageParam, Role::GlobalParam];
+const TERMINAL_REASON: &str = "but a terminal term sees x_N and parameters only (there is no u_N)";
+
+/// The roles a term at `stage` may depend on, and why no other.
+fn stage_roles(stage: Stage) -> (&'static [Role], &'static str) {
+    match stage {
+        Stage::Path => (&PATH_ROLES, ""),
+        Stage::Terminal => (&TERMINAL_ROLES, TERMINAL_REASON),
+    }
+}
+
 pub(super) fn validate(ocp: &Ocp<'_>) -> Result<Vec<OcpWarning>, ValidationErrors> {
     let mut c = Checker {
         roles: HashMap::new(),
         errors: Vec::new(),
         ocp,
     };
-    // Declarations: names, sizes, starting values, roles.
-    let mut seen = HashSet::new();
-    let params = ocp.parameters.iter().map(|p| {
-        let role = match p.kind {
-            ParamKind::Stage => Role::StageParam,
-            ParamKind::Global => Role::GlobalParam,
-        };
-        (&p.var, role)
-    });
-    let all: Vec<_> = ocp
-        .states
-        .iter()
-        .map(|v| (v, Role::State))
-        .chain(ocp.controls.iter().map(|v| (v, Role::Control)))
-        .chain(params)
-        .collect();
-    for &(v, role) in &all {
-        if !seen.insert(v.name.clone()) {
-            c.errors.push(OcpError::DuplicateName {
-                name: v.name.clone(),
-            });
-        }
-        if v.is_empty() {
-            c.errors.push(OcpError::EmptyVariable {
-                name: v.name.clone(),
-            });
-        }
-        for s in &v.symbols {
-            c.roles.insert(s.index(), role);
-        }
-        if let Some(start) = &v.start {
-            let what = if matches!(role, Role::State | Role::Control) {
-                "initial guess of"
-            } else {
-                "default value of"
-            };
-            let item = format!("{what} `{}`", v.name);
-            if start.len() != v.len() {
-                c.errors.push(OcpError::DimensionMismatch {
-                    item,
-                    found: format!("of length {}", start.len()),
-                    expected: format!("`{}` has {} entries", v.name, v.len()),
-                });
-            } else if let Some(&bad) = start.iter().find(|s| !s.is_finite()) {
-                c.errors.push(OcpError::NonFinite { item, value: bad });
-            }
-        }
-    }
-    let mut term_names = HashSet::new();
-    for n in ocp
-        .cost
-        .residuals
-        .iter()
-        .map(|r| &r.name)
-        .chain(ocp.constraints.iter().map(|c| &c.name))
-    {
-        if !term_names.insert(n.clone()) || seen.contains(n) {
-            c.errors.push(OcpError::DuplicateName { name: n.clone() });
-        }
-    }
-    let (nx, nu) = (ocp.nx(), ocp.nu());
-    // Horizon.
-    if ocp.horizon.n == 0 {
-        c.errors.push(OcpError::ZeroHorizon);
-    }
-    if !(ocp.horizon.dt.is_finite() && ocp.horizon.dt > 0.0) {
-        c.errors
-            .push(OcpError::NonPositiveDt { dt: ocp.horizon.dt });
-    }
-    // Dynamics.
-    let path_roles = [
-        Role::State,
-        Role::Control,
-        Role::StageParam,
-        Role::GlobalParam,
-    ];
-    let terminal_roles = [Role::State, Role::StageParam, Role::GlobalParam];
-    let terminal_reason = "but a terminal term sees x_N and parameters only (there is no u_N)";
-    let dyn_exprs = ocp.dynamics.exprs();
-    if let Dynamics::Continuous {
-        integrator: Integrator::Rk4 { steps: 0 },
-        ..
-    } = ocp.dynamics
-    {
-        c.errors.push(OcpError::ZeroSubsteps);
-    }
-    if c.len("the dynamics", dyn_exprs.len(), nx, "the state") {
-        c.exprs("the dynamics", dyn_exprs, &path_roles, "");
-    }
-    // Costs.
-    if let Some(t) = &ocp.cost.state {
-        c.tracking("state cost", t, nx, "the state", "Q");
-    }
-    if let Some(t) = &ocp.cost.control {
-        c.tracking("control cost", t, nu, "the control", "R");
-    }
-    if let Some(t) = &ocp.cost.terminal {
-        c.tracking("terminal cost", t, nx, "the state", "P");
-    }
-    for r in &ocp.cost.residuals {
-        let item = format!("residual `{}`", r.name);
-        let (roles, reason): (&[Role], &str) = match r.stage {
-            Stage::Path => (&path_roles, ""),
-            Stage::Terminal => (&terminal_roles, terminal_reason),
-        };
-        c.exprs(&item, &r.residual, roles, reason);
-        c.weight(
-            &format!("weight of {item}"),
-            &r.weight,
-            r.residual.len(),
-            "the residual",
-        );
-    }
-    if let Some(rate) = &ocp.cost.input_rate {
-        c.weight("input-rate weight", &rate.weight, nu, "the control");
-        if c.len(
-            "previous control of the input-rate cost",
-            rate.prev.len(),
-            nu,
-            "the control",
-        ) {
-            c.exprs(
-                "previous control of the input-rate cost",
-                &rate.prev,
-                &[Role::GlobalParam, Role::StageParam],
-                "but u_{-1} must be a runtime parameter",
-            );
-        }
-    }
-    // Bounds and constraints.
-    c.bounds("state bound", &ocp.state_bounds, &names(&ocp.states));
-    c.bounds("control bound", &ocp.control_bounds, &names(&ocp.controls));
-    if ocp.state_bounds.lower.len() != nx || ocp.state_bounds.upper.len() != nx {
-        c.len(
-            "state bounds",
-            ocp.state_bounds.lower.len(),
-            nx,
-            "the state",
-        );
-    }
-    if ocp.control_bounds.lower.len() != nu || ocp.control_bounds.upper.len() != nu {
-        c.len(
-            "control bounds",
-            ocp.control_bounds.lower.len(),
-            nu,
-            "the control",
-        );
-    }
+    let declared = c.declarations();
+    c.term_names(&declared);
+    c.horizon_and_dynamics();
+    c.costs();
+    c.box_bounds();
     for k in &ocp.constraints {
-        let item = format!("constraint `{}`", k.name);
-        let (roles, reason): (&[Role], &str) = match k.stage {
-            Stage::Path => (&path_roles, ""),
-            Stage::Terminal => (&terminal_roles, terminal_reason),
-        };
-        c.exprs(&item, &k.expr, roles, reason);
-        if k.lower.len() != k.expr.len() || k.upper.len() != k.expr.len() {
-            c.errors.push(OcpError::DimensionMismatch {
-                item: format!("bounds of {item}"),
-                found: format!("{} lower and {} upper values", k.lower.len(), k.upper.len()),
-                expected: format!("the constraint has {} entries", k.expr.len()),
-            });
-        } else {
-            for i in 0..k.expr.len() {
-                c.bound_pair(&format!("{item} entry {i}"), k.lower[i], k.upper[i]);
-            }
-        }
-        if let Some(s) = k.soft {
-            for v in [s.l1, s.l2] {
-                if !v.is_finite() {
-                    c.errors.push(OcpError::NonFinite {
-                        item: format!("slack penalty of {item}"),
-                        value: v,
-                    });
-                } else if v < 0.0 {
-                    c.errors.push(OcpError::NegativePenalty {
-                        item: item.clone(),
-                        value: v,
-                    });
-                }
-            }
-        }
+        c.constraint(k);
     }
-    // Warnings: controls the dynamics do not see.
-    let used: HashSet<usize> = super::symbols_of(dyn_exprs)
-        .iter()
-        .map(Expr::index)
-        .collect();
-    let warnings: Vec<OcpWarning> = c
-        .ocp
-        .u()
-        .iter()
-        .filter(|s| !used.contains(&s.index()))
-        .map(|s| OcpWarning::UnusedControl {
-            name: s.to_string(),
-        })
-        .collect();
+    let warnings = c.unused_controls();
     if c.errors.is_empty() {
         Ok(warnings)
     } else {
@@ -570,6 +403,225 @@ pub(super) fn validate(ocp: &Ocp<'_>) -> Result<Vec<OcpWarning>, ValidationError
             errors: c.errors,
             warnings,
         })
+    }
+}
+
+impl<'g> Checker<'_, 'g> {
+    /// Declarations: names, sizes, starting values; records each symbol's role. The names
+    /// declared.
+    fn declarations(&mut self) -> HashSet<String> {
+        let ocp = self.ocp;
+        let mut seen = HashSet::new();
+        let params = ocp.parameters.iter().map(|p| {
+            let role = match p.kind {
+                ParamKind::Stage => Role::StageParam,
+                ParamKind::Global => Role::GlobalParam,
+            };
+            (&p.var, role)
+        });
+        let all: Vec<_> = ocp
+            .states
+            .iter()
+            .map(|v| (v, Role::State))
+            .chain(ocp.controls.iter().map(|v| (v, Role::Control)))
+            .chain(params)
+            .collect();
+        for &(v, role) in &all {
+            if !seen.insert(v.name.clone()) {
+                self.errors.push(OcpError::DuplicateName {
+                    name: v.name.clone(),
+                });
+            }
+            if v.is_empty() {
+                self.errors.push(OcpError::EmptyVariable {
+                    name: v.name.clone(),
+                });
+            }
+            for s in &v.symbols {
+                self.roles.insert(s.index(), role);
+            }
+            self.starting_value(v, role);
+        }
+        seen
+    }
+
+    /// A variable's initial guess (states, controls) or default value (parameters): its
+    /// length and finiteness.
+    fn starting_value(&mut self, v: &super::Variable<'g>, role: Role) {
+        let Some(start) = &v.start else {
+            return;
+        };
+        let what = if matches!(role, Role::State | Role::Control) {
+            "initial guess of"
+        } else {
+            "default value of"
+        };
+        let item = format!("{what} `{}`", v.name);
+        if start.len() != v.len() {
+            self.errors.push(OcpError::DimensionMismatch {
+                item,
+                found: format!("of length {}", start.len()),
+                expected: format!("`{}` has {} entries", v.name, v.len()),
+            });
+        } else if let Some(&bad) = start.iter().find(|s| !s.is_finite()) {
+            self.errors.push(OcpError::NonFinite { item, value: bad });
+        }
+    }
+
+    /// The names of residuals and constraints: unique, and none a declaration's.
+    fn term_names(&mut self, declared: &HashSet<String>) {
+        let ocp = self.ocp;
+        let mut term_names = HashSet::new();
+        for n in ocp
+            .cost
+            .residuals
+            .iter()
+            .map(|r| &r.name)
+            .chain(ocp.constraints.iter().map(|c| &c.name))
+        {
+            if !term_names.insert(n.clone()) || declared.contains(n) {
+                self.errors
+                    .push(OcpError::DuplicateName { name: n.clone() });
+            }
+        }
+    }
+
+    /// The horizon, the integrator's substeps and the dynamics' length and symbols.
+    fn horizon_and_dynamics(&mut self) {
+        let ocp = self.ocp;
+        if ocp.horizon.n == 0 {
+            self.errors.push(OcpError::ZeroHorizon);
+        }
+        if !(ocp.horizon.dt.is_finite() && ocp.horizon.dt > 0.0) {
+            self.errors
+                .push(OcpError::NonPositiveDt { dt: ocp.horizon.dt });
+        }
+        let dyn_exprs = ocp.dynamics.exprs();
+        if let Dynamics::Continuous {
+            integrator: Integrator::Rk4 { steps: 0 },
+            ..
+        } = ocp.dynamics
+        {
+            self.errors.push(OcpError::ZeroSubsteps);
+        }
+        if self.len("the dynamics", dyn_exprs.len(), ocp.nx(), "the state") {
+            self.exprs("the dynamics", dyn_exprs, &PATH_ROLES, "");
+        }
+    }
+
+    /// The cost terms: tracking terms, residuals and the input-rate term.
+    fn costs(&mut self) {
+        let ocp = self.ocp;
+        let (nx, nu) = (ocp.nx(), ocp.nu());
+        if let Some(t) = &ocp.cost.state {
+            self.tracking("state cost", t, nx, "the state", "Q");
+        }
+        if let Some(t) = &ocp.cost.control {
+            self.tracking("control cost", t, nu, "the control", "R");
+        }
+        if let Some(t) = &ocp.cost.terminal {
+            self.tracking("terminal cost", t, nx, "the state", "P");
+        }
+        for r in &ocp.cost.residuals {
+            let item = format!("residual `{}`", r.name);
+            let (roles, reason) = stage_roles(r.stage);
+            self.exprs(&item, &r.residual, roles, reason);
+            self.weight(
+                &format!("weight of {item}"),
+                &r.weight,
+                r.residual.len(),
+                "the residual",
+            );
+        }
+        if let Some(rate) = &ocp.cost.input_rate {
+            self.weight("input-rate weight", &rate.weight, nu, "the control");
+            if self.len(
+                "previous control of the input-rate cost",
+                rate.prev.len(),
+                nu,
+                "the control",
+            ) {
+                self.exprs(
+                    "previous control of the input-rate cost",
+                    &rate.prev,
+                    &[Role::GlobalParam, Role::StageParam],
+                    "but u_{-1} must be a runtime parameter",
+                );
+            }
+        }
+    }
+
+    /// The state and control bounds: their pairs and lengths.
+    fn box_bounds(&mut self) {
+        let ocp = self.ocp;
+        let (nx, nu) = (ocp.nx(), ocp.nu());
+        self.bounds("state bound", &ocp.state_bounds, &names(&ocp.states));
+        self.bounds("control bound", &ocp.control_bounds, &names(&ocp.controls));
+        if ocp.state_bounds.lower.len() != nx || ocp.state_bounds.upper.len() != nx {
+            self.len(
+                "state bounds",
+                ocp.state_bounds.lower.len(),
+                nx,
+                "the state",
+            );
+        }
+        if ocp.control_bounds.lower.len() != nu || ocp.control_bounds.upper.len() != nu {
+            self.len(
+                "control bounds",
+                ocp.control_bounds.lower.len(),
+                nu,
+                "the control",
+            );
+        }
+    }
+
+    /// A general constraint: its symbols, bounds and slack penalties.
+    fn constraint(&mut self, k: &super::Constraint<'g>) {
+        let item = format!("constraint `{}`", k.name);
+        let (roles, reason) = stage_roles(k.stage);
+        self.exprs(&item, &k.expr, roles, reason);
+        if k.lower.len() != k.expr.len() || k.upper.len() != k.expr.len() {
+            self.errors.push(OcpError::DimensionMismatch {
+                item: format!("bounds of {item}"),
+                found: format!("{} lower and {} upper values", k.lower.len(), k.upper.len()),
+                expected: format!("the constraint has {} entries", k.expr.len()),
+            });
+        } else {
+            for i in 0..k.expr.len() {
+                self.bound_pair(&format!("{item} entry {i}"), k.lower[i], k.upper[i]);
+            }
+        }
+        if let Some(s) = k.soft {
+            for v in [s.l1, s.l2] {
+                if !v.is_finite() {
+                    self.errors.push(OcpError::NonFinite {
+                        item: format!("slack penalty of {item}"),
+                        value: v,
+                    });
+                } else if v < 0.0 {
+                    self.errors.push(OcpError::NegativePenalty {
+                        item: item.clone(),
+                        value: v,
+                    });
+                }
+            }
+        }
+    }
+
+    /// Warnings: controls the dynamics do not see.
+    fn unused_controls(&self) -> Vec<OcpWarning> {
+        let used: HashSet<usize> = super::symbols_of(self.ocp.dynamics.exprs())
+            .iter()
+            .map(Expr::index)
+            .collect();
+        self.ocp
+            .u()
+            .iter()
+            .filter(|s| !used.contains(&s.index()))
+            .map(|s| OcpWarning::UnusedControl {
+                name: s.to_string(),
+            })
+            .collect()
     }
 }
 

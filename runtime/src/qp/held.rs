@@ -155,16 +155,7 @@ impl<
             // On a new factorization the solve starts from zero with the held controls on
             // their bounds; through the Schur complement, from the last set's solution.
             if !schur {
-                for (k, u) in self.sol.u.iter_mut().enumerate() {
-                    let r = &self.ru[k];
-                    for i in 0..NU {
-                        if lower[k][i] {
-                            u[i] = r.lo[i];
-                        } else if upper[k][i] {
-                            u[i] = r.hi[i];
-                        }
-                    }
-                }
+                self.held_controls_on_bounds(&lower, &upper);
             }
             let mut steps = 1 + self.settings.refine;
             for retry in [false, true] {
@@ -200,18 +191,7 @@ impl<
                         && res[2] <= st.tol_ineq * f
                 };
                 if within(T::ONE) {
-                    self.dual_valid = true;
-                    self.polished = false;
-                    self.on_active_set = true;
-                    return Ok(QpInfo {
-                        status: QpStatus::Solved,
-                        iterations: 0,
-                        active_set_solves: solves,
-                        res_stat: res[0],
-                        res_eq: res[1],
-                        res_ineq: res[2],
-                        mu: T::ZERO,
-                    });
+                    return Ok(self.solved_on_held_set(&res, solves));
                 }
                 // Rounding (tight tolerances on an ill-conditioned QP) leaves residuals near
                 // the tolerances, and one more step mends them; a set that no longer holds
@@ -225,6 +205,40 @@ impl<
         }
         self.set_rows_if(qp, unset);
         Err(solves)
+    }
+
+    /// The held controls on their bounds: the start of a solve on a new factorization
+    /// ([`solve_held`](Self::solve_held)).
+    #[inline]
+    fn held_controls_on_bounds(&mut self, lower: &[[bool; NU]; N], upper: &[[bool; NU]; N]) {
+        for (k, u) in self.sol.u.iter_mut().enumerate() {
+            let r = &self.ru[k];
+            for i in 0..NU {
+                if lower[k][i] {
+                    u[i] = r.lo[i];
+                } else if upper[k][i] {
+                    u[i] = r.hi[i];
+                }
+            }
+        }
+    }
+
+    /// The outcome of a solve on the warm active set whose residuals `res` met the
+    /// tolerances after `solves` active-set solves ([`solve_held`](Self::solve_held)).
+    #[inline]
+    fn solved_on_held_set(&mut self, res: &[T; 4], solves: u32) -> QpInfo<T> {
+        self.dual_valid = true;
+        self.polished = false;
+        self.on_active_set = true;
+        QpInfo {
+            status: QpStatus::Solved,
+            iterations: 0,
+            active_set_solves: solves,
+            res_stat: res[0],
+            res_eq: res[1],
+            res_ineq: res[2],
+            mu: T::ZERO,
+        }
     }
 
     /// Takes a move through the Schur complement (module docs), on top of the factorized set
