@@ -14,8 +14,8 @@ use firmware_shim::setpoint::ThrustMap;
 use firmware_shim::signing::SigningKey;
 use firmware_shim::transport::{Address, Link, LinkOptions, LinkStats};
 use firmware_shim::trust::Trust;
-use mpc_sim::mission::{G, MissionKind};
-use mpc_sim::report;
+use mpc_mission::mission::{G, MissionKind};
+use mpc_mission::report;
 
 use crate::FlyArgs;
 
@@ -103,30 +103,9 @@ fn pilot_config(args: &FlyArgs) -> Result<PilotConfig, String> {
 }
 
 pub(crate) fn fly(args: &FlyArgs) -> ExitCode {
-    let cfg = match pilot_config(args) {
-        Ok(c) => c,
-        Err(e) => {
-            eprintln!("error: {e}");
-            return ExitCode::from(2);
-        }
-    };
-    if let Err(e) = crate::sim::check_solver("nmpc", args.json) {
-        eprintln!("error: {e}");
-        return ExitCode::FAILURE;
-    }
-    let link = match open(args) {
-        Ok(l) => l,
-        Err(e) => {
-            eprintln!("error: {e}");
-            return ExitCode::from(2);
-        }
-    };
-    let mut pilot = match Pilot::new(cfg) {
-        Ok(p) => p,
-        Err(e) => {
-            eprintln!("error: {e}");
-            return ExitCode::from(2);
-        }
+    let (link, mut pilot) = match prepare(args) {
+        Ok(v) => v,
+        Err(code) => return code,
     };
     let stop = interrupt_flag();
     if !args.json {
@@ -136,9 +115,55 @@ pub(crate) fn fly(args: &FlyArgs) -> ExitCode {
         );
     }
     let started = Instant::now();
-    // Print the events as they happen: run the loop in slices.
-    // At the timeout (or Ctrl-C) the pilot lands the vehicle (AUTO.LAND) and waits at most
-    // a minute more for PX4 to disarm.
+    let timed_out = run_pilot(args, &link, &mut pilot, started, &stop);
+    if pilot.state().is_none() {
+        eprintln!(
+            "error: no ODOMETRY (nor LOCAL_POSITION_NED + ATTITUDE_QUATERNION) from PX4 (system \
+             1, component 1) on {} in {:.1} s: is PX4 sending to this address?",
+            args.connect,
+            started.elapsed().as_secs_f64()
+        );
+        eprintln!("{}", link_line(&link.stats()));
+        return ExitCode::FAILURE;
+    }
+    if timed_out {
+        eprintln!(
+            "error: the mission did not finish within --timeout {} s",
+            args.timeout
+        );
+    }
+    if let Some(f) = pilot.failure() {
+        eprintln!("error: {f}");
+        return ExitCode::FAILURE;
+    }
+    report_flight(args, &link, &pilot)
+}
+
+/// The link and the pilot from the options, once the solver is checked; otherwise the
+/// exit status (2 for bad options), the error printed.
+fn prepare(args: &FlyArgs) -> Result<(Link, Pilot), ExitCode> {
+    let fail = |e: &dyn std::fmt::Display, code: ExitCode| {
+        eprintln!("error: {e}");
+        code
+    };
+    let cfg = pilot_config(args).map_err(|e| fail(&e, ExitCode::from(2)))?;
+    crate::trials::check_solver("nmpc", args.json).map_err(|e| fail(&e, ExitCode::FAILURE))?;
+    let link = open(args).map_err(|e| fail(&e, ExitCode::from(2)))?;
+    let pilot = Pilot::new(cfg).map_err(|e| fail(&e, ExitCode::from(2)))?;
+    Ok((link, pilot))
+}
+
+/// Runs the pilot on the link in slices of 0.1 s, printing its events as they happen, until
+/// it has finished, Ctrl-C came before any session, or the timeout: then the pilot lands
+/// the vehicle (AUTO.LAND) and waits at most a minute more for PX4 to disarm. Whether the
+/// timeout was reached.
+fn run_pilot(
+    args: &FlyArgs,
+    link: &Link,
+    pilot: &mut Pilot,
+    started: Instant,
+    stop: &AtomicBool,
+) -> bool {
     const LANDING_GRACE: f64 = 60.0;
     let mut shown = 0;
     let mut timed_out = false;
@@ -163,13 +188,7 @@ pub(crate) fn fly(args: &FlyArgs) -> ExitCode {
         } else {
             args.timeout
         };
-        pilot::run(
-            &link,
-            &mut pilot,
-            started,
-            (elapsed + 0.1).min(until),
-            &stop,
-        );
+        pilot::run(link, pilot, started, (elapsed + 0.1).min(until), stop);
         for e in pilot.events().iter().skip(shown) {
             if !args.json {
                 eprintln!("{:9.3} s  {}", e.t, e.what);
@@ -177,26 +196,13 @@ pub(crate) fn fly(args: &FlyArgs) -> ExitCode {
         }
         shown = pilot.events().len();
     }
-    if pilot.state().is_none() {
-        eprintln!(
-            "error: no ODOMETRY (nor LOCAL_POSITION_NED + ATTITUDE_QUATERNION) from PX4 (system \
-             1, component 1) on {} in {:.1} s: is PX4 sending to this address?",
-            args.connect,
-            started.elapsed().as_secs_f64()
-        );
-        eprintln!("{}", link_line(&link.stats()));
-        return ExitCode::FAILURE;
-    }
-    if timed_out {
-        eprintln!(
-            "error: the mission did not finish within --timeout {} s",
-            args.timeout
-        );
-    }
-    if let Some(f) = pilot.failure() {
-        eprintln!("error: {f}");
-        return ExitCode::FAILURE;
-    }
+    timed_out
+}
+
+/// Prints the flight's report (the table and the link's figures, or one JSON object),
+/// writes the log, the plots and the vehicle's profile; the exit status: success only for a
+/// mission that met every criterion with no failsafe.
+fn report_flight(args: &FlyArgs, link: &Link, pilot: &Pilot) -> ExitCode {
     let mut rep = pilot.report();
     rep.link = Some(link.stats());
     if args.json {
@@ -216,7 +222,7 @@ pub(crate) fn fly(args: &FlyArgs) -> ExitCode {
     }
     if !args.no_plots
         && !pilot.samples().is_empty()
-        && let Err(e) = crate::sim::write_log_and_plots(
+        && let Err(e) = crate::trials::write_log_and_plots(
             &args.out,
             &format!("fly_{}", args.mission),
             &format!("{} · mpcc fly · PX4 telemetry", args.mission),

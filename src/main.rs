@@ -11,6 +11,7 @@ mod fly;
 mod sim;
 mod sitl;
 mod throw;
+mod trials;
 use mpc_dsl::lang::{ParseOptions, parse};
 use mpc_dsl::ocp::{Dynamics, Integrator, Ocp, ParamKind, Variable};
 use mpc_dsl::{Expr, ExprKind, Graph, Sparsity};
@@ -335,6 +336,7 @@ struct BuildArgs {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     match cli.command {
+        Command::Sim(args) if args.mission == "flip-throw" => throw::run(&args),
         Command::Sim(args) => sim::run(&args),
         Command::Bench(args) => bench::run(&args),
         Command::Fly(args) => fly::fly(&args),
@@ -512,10 +514,18 @@ fn pattern(s: &Sparsity, rows: &[String], cols: usize) -> String {
     out
 }
 
+/// What `mpcc check` prints of a model: its description, then its expressions' sizes and
+/// Jacobians.
 fn report(g: &Graph, ocp: &Ocp<'_>) -> mpc_dsl::Result<String> {
+    let mut o = describe(ocp);
+    o.push_str(&expressions(g, ocp)?);
+    Ok(o)
+}
+
+/// The model's dimensions, horizon, cost terms, bounds and constraints.
+fn describe(ocp: &Ocp<'_>) -> String {
     use std::fmt::Write as _;
     let mut o = String::new();
-    let (x, u, p) = (ocp.x(), ocp.u(), ocp.p());
     let integ = match &ocp.dynamics {
         Dynamics::Continuous {
             integrator: Integrator::Rk4 { steps },
@@ -587,6 +597,15 @@ fn report(g: &Graph, ocp: &Ocp<'_>) -> mpc_dsl::Result<String> {
         "  constraints {} general ({rows} rows, {soft} soft)",
         ocp.constraints.len()
     );
+    o
+}
+
+/// The dynamics and the discrete map (operations as trees, instructions after CSE) and the
+/// sparsity of their Jacobians.
+fn expressions(g: &Graph, ocp: &Ocp<'_>) -> mpc_dsl::Result<String> {
+    use std::fmt::Write as _;
+    let mut o = String::new();
+    let (x, u, p) = (ocp.x(), ocp.u(), ocp.p());
     let mut inputs: Vec<Expr<'_>> = x.to_vec();
     inputs.extend(u.iter().copied());
     inputs.extend(p.iter().copied());

@@ -2,12 +2,9 @@
 
 use std::path::Path;
 use std::process::ExitCode;
-use std::sync::Mutex;
-use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
 use indicatif::{ProgressBar, ProgressStyle};
-use mpc_codegen::{Options, RuntimeDep};
 use mpc_sim::controller::ControllerKind;
 use mpc_sim::estimator::EstimatorConfig;
 use mpc_sim::mission::{MissionConfig, MissionKind, Phase};
@@ -15,62 +12,7 @@ use mpc_sim::report;
 use mpc_sim::run::{SimConfig, TrialResult, run_trial};
 
 use crate::SimArgs;
-
-/// The generated solvers the simulator links, with the model each comes from.
-const SOLVERS: [(&str, &str, &str); 3] = [
-    (
-        "paper",
-        "models/paper_pointmass.mpc",
-        "generated/paper_pointmass",
-    ),
-    (
-        "nmpc",
-        "models/quadrotor_rates.mpc",
-        "generated/quadrotor_rates",
-    ),
-    (
-        "probe",
-        "models/quadrotor_probe.mpc",
-        "generated/quadrotor_probe",
-    ),
-];
-
-/// Regenerates the controller's solver from its model and compares it with the crate the
-/// simulator is built with: a stale crate would fly another controller than the model says.
-pub(crate) fn check_solver(controller: &str, quiet: bool) -> Result<(), String> {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let Some((_, model, dir)) = SOLVERS.iter().find(|s| s.0 == controller) else {
-        return Ok(());
-    };
-    if !root.join(model).is_file() {
-        // An installed binary away from its checkout: nothing to compare with.
-        if !quiet {
-            eprintln!("solver: {model} not found beside this binary's sources; check skipped");
-        }
-        return Ok(());
-    }
-    let opts = Options {
-        runtime: RuntimeDep::Path("../../runtime".into()),
-        ..Options::new()
-    };
-    let t = Instant::now();
-    let generated = mpc_codegen::generate_file(root.join(model), None, &opts)
-        .map_err(|e| format!("{model}: {e}"))?;
-    let stale = generated.check(&root.join(dir));
-    if !stale.is_empty() {
-        return Err(format!(
-            "{dir} is not what {model} generates ({stale:?} differ): regenerate it with \
-             `cargo run -- build {model} -o {dir}` and rebuild"
-        ));
-    }
-    if !quiet {
-        eprintln!(
-            "solver: generated {dir} from {model} in {:.0} ms (identical to the crate linked)",
-            t.elapsed().as_secs_f64() * 1e3
-        );
-    }
-    Ok(())
-}
+use crate::trials::{check_solver, fly_all, write_log_and_plots};
 
 /// The mission configuration of `kind` with the command line's `--rally`, `--altitude` and
 /// `--flip-rate` (shared by `mpcc sim` and `mpcc fly`).
@@ -177,9 +119,6 @@ fn flip_start(cfg: &SimConfig) -> Option<f64> {
 }
 
 pub(crate) fn run(args: &SimArgs) -> ExitCode {
-    if args.mission == "flip-throw" {
-        return crate::throw::run(args);
-    }
     let (_, controller, mission_cfg) = match parse(args).and_then(|(m, c)| {
         let cfg = mission_config(m, &args.shape)?;
         Ok((m, c, cfg))
@@ -281,65 +220,6 @@ pub(crate) fn run(args: &SimArgs) -> ExitCode {
     }
 }
 
-/// Flies every configuration on all cores with `fly`; returns `summarize` of each trial in
-/// order (trials that could not be flown are reported on stderr and left out) and the first
-/// trial's full result (for the log and plots).
-pub(crate) fn fly_all<C, R, S, E>(
-    configs: &[C],
-    bar: &ProgressBar,
-    fly: impl Fn(&C) -> Result<R, E> + Sync,
-    summarize: impl Fn(&R) -> S + Sync,
-) -> (Vec<S>, Option<R>)
-where
-    C: Sync,
-    R: Send,
-    S: Send + Clone,
-    E: std::fmt::Display,
-{
-    let next = AtomicUsize::new(0);
-    let out: Mutex<Vec<Option<S>>> = Mutex::new(vec![None; configs.len()]);
-    let first: Mutex<Option<R>> = Mutex::new(None);
-    let workers = std::thread::available_parallelism()
-        .map_or(1, usize::from)
-        .min(configs.len())
-        .max(1);
-    std::thread::scope(|s| {
-        for _ in 0..workers {
-            s.spawn(|| {
-                loop {
-                    let i = next.fetch_add(1, Ordering::Relaxed);
-                    let Some(cfg) = configs.get(i) else { break };
-                    match fly(cfg) {
-                        Ok(res) => {
-                            let summary = summarize(&res);
-                            if let Ok(mut o) = out.lock()
-                                && let Some(slot) = o.get_mut(i)
-                            {
-                                *slot = Some(summary);
-                            }
-                            if i == 0
-                                && let Ok(mut f) = first.lock()
-                            {
-                                *f = Some(res);
-                            }
-                        }
-                        // Validated before flying: a trial cannot fail to start.
-                        Err(e) => eprintln!("error: trial {i}: {e}"),
-                    }
-                    bar.inc(1);
-                }
-            });
-        }
-    });
-    let summaries = out
-        .into_inner()
-        .unwrap_or_default()
-        .into_iter()
-        .flatten()
-        .collect();
-    (summaries, first.into_inner().unwrap_or_default())
-}
-
 fn write_outputs(dir: &Path, res: &TrialResult, mission: &str, quiet: bool) -> Result<(), String> {
     let title = format!(
         "{mission} · {} controller · seed {}",
@@ -347,32 +227,4 @@ fn write_outputs(dir: &Path, res: &TrialResult, mission: &str, quiet: bool) -> R
         res.config.seed
     );
     write_log_and_plots(dir, mission, &title, &res.samples, quiet)
-}
-
-/// Writes `DIR/STEM.csv` and the four plots `DIR/STEM_*.png` of a flight log; says so unless
-/// `quiet`.
-pub(crate) fn write_log_and_plots(
-    dir: &Path,
-    stem: &str,
-    title: &str,
-    samples: &[mpc_sim::log::Sample],
-    quiet: bool,
-) -> Result<(), String> {
-    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-    let csv = dir.join(format!("{stem}.csv"));
-    mpc_sim::plot::write_csv(&csv, samples).map_err(|e| e.to_string())?;
-    let names = Phase::names();
-    let plots = mpc_sim::plot::write_plots(dir, &format!("{stem}_"), title, samples, &names)
-        .map_err(|e| e.to_string())?;
-    if !quiet {
-        println!(
-            "wrote {}, {}, {}, {}, {}",
-            csv.display(),
-            plots.position.display(),
-            plots.rates.display(),
-            plots.thrust.display(),
-            plots.solver_time.display()
-        );
-    }
-    Ok(())
 }

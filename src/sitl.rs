@@ -1,4 +1,4 @@
-//! `mpcc sitl`: the simulated PX4 vehicle (`firmware_shim::vehicle`) on a MAVLink link, for
+//! `mpcc sitl`: the simulated PX4 vehicle (`px4_sim::vehicle`) on a MAVLink link, for
 //! `mpcc fly` to fly against.
 
 use std::path::Path;
@@ -7,10 +7,10 @@ use std::process::ExitCode;
 use firmware_shim::messages;
 use firmware_shim::signing::SigningKey;
 use firmware_shim::transport::{Address, Link, LinkOptions};
-use firmware_shim::vehicle::{
+use mpc_mission::estimate::EstimatorConfig;
+use px4_sim::vehicle::{
     Airframe, ClockJump, HEIGHT_BIAS_RAMP, SimVehicle, VehicleConfig, VehicleConfigError,
 };
-use mpc_sim::estimator::EstimatorConfig;
 
 use crate::SitlArgs;
 use crate::fly::interrupt_flag;
@@ -145,7 +145,7 @@ pub(crate) fn sitl(args: &SitlArgs) -> ExitCode {
     }
     let duration = args.duration.unwrap_or(f64::INFINITY);
     let mut progress = Progress::default();
-    firmware_shim::vehicle::serve_with(&link, &mut vehicle, duration, &stop, |v| {
+    px4_sim::vehicle::serve_with(&link, &mut vehicle, duration, &stop, |v| {
         progress.on_tick(v, args.json, args.exit_after_flight)
     });
     sitl_summary(&vehicle, &args.vehicle, args.json)
@@ -155,7 +155,7 @@ pub(crate) fn sitl(args: &SitlArgs) -> ExitCode {
 fn summary_json(vehicle: &SimVehicle, airframe: &str) -> serde_json::Value {
     let r = vehicle.record();
     let cfg = vehicle.config();
-    let v3 = |p: &mpc_sim::nalgebra::Vector3<f64>| [p.x, p.y, p.z];
+    let v3 = |p: &mpc_mission::nalgebra::Vector3<f64>| [p.x, p.y, p.z];
     serde_json::json!({
         "vehicle": airframe,
         "clock_rate": cfg.clock_rate,

@@ -88,7 +88,7 @@ pub(crate) fn run(args: &SimArgs) -> ExitCode {
             return ExitCode::from(2);
         }
     };
-    if let Err(e) = crate::sim::check_solver("probe", args.json) {
+    if let Err(e) = crate::trials::check_solver("probe", args.json) {
         eprintln!("error: {e}");
         return ExitCode::FAILURE;
     }
@@ -121,7 +121,7 @@ pub(crate) fn run(args: &SimArgs) -> ExitCode {
             ProgressBar::hidden()
         };
         let (summaries, first) =
-            crate::sim::fly_all(&configs, &bar, th::run_throw_trial, th::summarize_throw);
+            crate::trials::fly_all(&configs, &bar, th::run_throw_trial, th::summarize_throw);
         bar.finish_and_clear();
         if summaries.len() != configs.len() {
             rows.push((
@@ -197,7 +197,7 @@ fn write_outputs(dir: &Path, range: f64, res: &ThrowTrial, quiet: bool) -> Resul
         "flip-throw {range} m · probe NMPC · seed {}",
         res.config.seed
     );
-    crate::sim::write_log_and_plots(dir, &stem, &title, &res.samples, quiet)?;
+    crate::trials::write_log_and_plots(dir, &stem, &title, &res.samples, quiet)?;
     let side = dir.join(format!("{stem}_probe.png"));
     mpc_sim::plot::write_throw_plot(
         &side,

@@ -1,6 +1,8 @@
 //! `firmware-shim`: the bridge between an mpcc-generated solver and the PX4 autopilot, as
 //! the paper flew it (a companion computer commanding PX4 in OFFBOARD), without ROS.
-//! `mpcc fly` and `mpcc sitl` are built on it; `docs/shim.md` is the user's guide.
+//! `mpcc fly` is built on it; `docs/shim.md` is the user's guide. The missions and the
+//! controller it flies are `mpc-mission`'s (the simulator's); the simulated PX4 it is tested
+//! against is `px4-sim` (`mpcc sitl`), the tests' fault-injecting relay `mav-relay`.
 //!
 //! * [`pilot`]: the controller loop: PX4's state in (ODOMETRY, or LOCAL_POSITION_NED +
 //!   ATTITUDE_QUATERNION), the generated NMPC flying the simulator's missions, body-rate +
@@ -29,15 +31,7 @@
 //!   when given a key;
 //! * [`trust`]: whom a UDP link listens to (the first PX4 HEARTBEAT's sender, relocked only
 //!   after silence) and the count of everything else;
-//! * [`signing`]: MAVLink 2 message signing: the key file, the check of every frame;
-//! * [`sitl`]: the simulated PX4's commander (PX4's offboard rules: OFFBOARD only while
-//!   setpoints stream, arming checks, the offboard-loss failsafe, PX4's land detector and its
-//!   automatic disarm in any mode, message intervals, TIMESYNC, SIH's parameters);
-//! * [`vehicle`]: the simulated PX4 vehicle (`mpcc sitl`): the commander around the
-//!   simulator's plant and rate loop, flown by the offboard setpoint or by PX4-like position
-//!   and attitude control (hold, land, return), sending PX4's messages in PX4's frames, with
-//!   a record of the true flight; [`vehicle::serve`] puts it on a link in real time;
-//! * [`relay`]: a fault-injecting UDP relay (loss, duplication, jitter, blackouts) for tests.
+//! * [`signing`]: MAVLink 2 message signing: the key file, the check of every frame.
 
 pub mod clock;
 pub mod frames;
@@ -45,13 +39,10 @@ pub mod link;
 pub mod messages;
 pub mod pilot;
 pub mod profile;
-pub mod relay;
 pub mod setpoint;
 pub mod signing;
-pub mod sitl;
 pub mod transport;
 pub mod trust;
-pub mod vehicle;
 pub mod watch;
 
 /// The linear-algebra crate of this crate's API.

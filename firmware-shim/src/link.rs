@@ -418,51 +418,7 @@ impl Session {
             tick.send.push(messages::heartbeat());
             self.last_heartbeat_sent = Some(now);
         }
-        // Retransmissions and timeouts of the pending command.
-        if let Some(p) = self.pending {
-            if self.confirmed(&p) {
-                self.pending = None;
-            } else if let Some(ta) = p.acked_at {
-                if now - ta > self.cfg.confirm_timeout {
-                    // Acknowledged, but the HEARTBEAT never showed it (heartbeats lost, or
-                    // PX4 changed its mind): ask again, as for a missing acknowledgement.
-                    let keep_asking = matches!(self.phase, Phase::Failsafe(_) | Phase::Finishing);
-                    if p.attempts >= self.cfg.retries && !keep_asking {
-                        self.pending = None;
-                        self.phase = Phase::Failed(SessionError::NotConfirmed(p.cmd.mav_cmd()));
-                    } else {
-                        let attempts = p.attempts.saturating_add(1);
-                        self.pending = Some(Pending {
-                            sent_at: now,
-                            attempts,
-                            acked_at: None,
-                            ..p
-                        });
-                        tick.send.push(messages::command_long(p.cmd, attempts));
-                    }
-                }
-            } else if now - p.sent_at >= self.cfg.ack_timeout {
-                let keep_asking = matches!(self.phase, Phase::Failsafe(_) | Phase::Finishing);
-                if p.attempts >= self.cfg.retries
-                    && matches!(p.cmd, Command::MessageInterval { .. })
-                {
-                    // Not fatal: PX4 keeps its default rate (the setpoints tell whether
-                    // anyone listens).
-                    self.pending = None;
-                } else if p.attempts >= self.cfg.retries && !keep_asking {
-                    self.pending = None;
-                    self.phase = Phase::Failed(SessionError::NoAck(p.cmd.mav_cmd()));
-                } else {
-                    let attempts = p.attempts.saturating_add(1);
-                    self.pending = Some(Pending {
-                        sent_at: now,
-                        attempts,
-                        ..p
-                    });
-                    tick.send.push(messages::command_long(p.cmd, attempts));
-                }
-            }
-        }
+        self.service_pending(now, &mut tick);
         if self.abort
             && !matches!(
                 self.phase,
@@ -472,6 +428,61 @@ impl Session {
             self.engage(Failsafe::Abort, now, &mut tick);
             return tick;
         }
+        self.advance(now, &mut tick);
+        tick.mpc_in_control = self.phase == Phase::Flying;
+        tick
+    }
+
+    /// Retransmissions and timeouts of the pending command.
+    fn service_pending(&mut self, now: f64, tick: &mut Tick) {
+        let Some(p) = self.pending else {
+            return;
+        };
+        if self.confirmed(&p) {
+            self.pending = None;
+        } else if let Some(ta) = p.acked_at {
+            if now - ta > self.cfg.confirm_timeout {
+                // Acknowledged, but the HEARTBEAT never showed it (heartbeats lost, or
+                // PX4 changed its mind): ask again, as for a missing acknowledgement.
+                let keep_asking = matches!(self.phase, Phase::Failsafe(_) | Phase::Finishing);
+                if p.attempts >= self.cfg.retries && !keep_asking {
+                    self.pending = None;
+                    self.phase = Phase::Failed(SessionError::NotConfirmed(p.cmd.mav_cmd()));
+                } else {
+                    let attempts = p.attempts.saturating_add(1);
+                    self.pending = Some(Pending {
+                        sent_at: now,
+                        attempts,
+                        acked_at: None,
+                        ..p
+                    });
+                    tick.send.push(messages::command_long(p.cmd, attempts));
+                }
+            }
+        } else if now - p.sent_at >= self.cfg.ack_timeout {
+            let keep_asking = matches!(self.phase, Phase::Failsafe(_) | Phase::Finishing);
+            if p.attempts >= self.cfg.retries && matches!(p.cmd, Command::MessageInterval { .. }) {
+                // Not fatal: PX4 keeps its default rate (the setpoints tell whether
+                // anyone listens).
+                self.pending = None;
+            } else if p.attempts >= self.cfg.retries && !keep_asking {
+                self.pending = None;
+                self.phase = Phase::Failed(SessionError::NoAck(p.cmd.mav_cmd()));
+            } else {
+                let attempts = p.attempts.saturating_add(1);
+                self.pending = Some(Pending {
+                    sent_at: now,
+                    attempts,
+                    ..p
+                });
+                tick.send.push(messages::command_long(p.cmd, attempts));
+            }
+        }
+    }
+
+    /// The session's next step in its phase: the commands of the start, the failsafes in
+    /// flight, the landing at the end.
+    fn advance(&mut self, now: f64, tick: &mut Tick) {
         match self.phase {
             Phase::Streaming { since } => {
                 if !self.interval_requested && self.cfg.odometry_rate > 0.0 {
@@ -502,21 +513,21 @@ impl Session {
                 self.phase = Phase::Finishing;
                 self.start(Command::SetMode(Px4Mode::Land), now, &mut tick.send);
             }
-            Phase::Flying if !self.armed => self.engage(Failsafe::Px4Disarmed, now, &mut tick),
+            Phase::Flying if !self.armed => self.engage(Failsafe::Px4Disarmed, now, tick),
             Phase::Flying if self.trip.is_some() => {
                 let f = self.trip.take().unwrap_or(Failsafe::Abort);
-                self.engage(f, now, &mut tick);
+                self.engage(f, now, tick);
             }
             Phase::Flying => {
                 let stale = self
                     .last_odometry
                     .is_none_or(|t| now - t > self.cfg.odometry_timeout);
                 if stale {
-                    self.engage(Failsafe::OdometryLost, now, &mut tick);
+                    self.engage(Failsafe::OdometryLost, now, tick);
                 } else if self.solver_failures >= self.cfg.max_solver_failures {
-                    self.engage(Failsafe::SolverFailures, now, &mut tick);
+                    self.engage(Failsafe::SolverFailures, now, tick);
                 } else if self.px4_mode.is_some_and(|m| m != Px4Mode::Offboard) {
-                    self.engage(Failsafe::Px4LeftOffboard, now, &mut tick);
+                    self.engage(Failsafe::Px4LeftOffboard, now, tick);
                 }
             }
             Phase::Finishing => {
@@ -541,7 +552,5 @@ impl Session {
             }
             Phase::Failed(_) | Phase::Done => {}
         }
-        tick.mpc_in_control = self.phase == Phase::Flying;
-        tick
     }
 }

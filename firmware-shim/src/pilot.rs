@@ -1,5 +1,5 @@
 //! The controller loop: PX4's state in, the generated NMPC's body-rate + thrust setpoints out,
-//! the mission state machine of the simulator (`mpc_sim::mission`) in between, the offboard
+//! the simulator's mission state machine (`mpc_mission::mission`) in between, the offboard
 //! [`Session`] with its failsafes around it. Clocked by the caller ([`Pilot::poll`] every
 //! millisecond or so, [`Pilot::on_message`] for everything received); [`run`] is that loop on
 //! a [`Link`].
@@ -37,15 +37,14 @@ use std::time::{Duration, Instant};
 
 use mavlink::MavHeader;
 use mavlink::dialects::common::MavMessage;
-use mpc_sim::controller::{Controller, InnerCommand, NmpcController, OuterStats};
-use mpc_sim::estimator::Estimate;
-use mpc_sim::log::Sample;
-use mpc_sim::mission::{
+use mpc_mission::controller::{Controller, InnerCommand, NmpcController, OuterStats};
+use mpc_mission::estimate::Estimate;
+use mpc_mission::log::Sample;
+use mpc_mission::mission::{
     G, Mission, MissionConfig, MissionInput, MissionKind, Phase as MissionPhase,
 };
-use mpc_sim::plant::QuadState;
-use mpc_sim::report::{self, TrialSummary};
-use mpc_sim::run::{Outcome, SimConfig, Touchdown, TrialResult};
+use mpc_mission::report::{self, Conditions, Outcome, Touchdown, TrialSummary};
+use mpc_mission::vehicle::QuadState;
 use nalgebra::{UnitQuaternion, Vector3};
 
 use crate::clock::{RoundTrip, VehicleClock, Verdict};
@@ -1237,21 +1236,22 @@ impl Pilot {
                 .map(|(_, t)| *t);
             let landed = matches!(self.session.as_ref().map(Session::phase), Some(Phase::Done))
                 || (self.finished() && f.touchdown.is_some());
-            let res = TrialResult {
-                config: SimConfig::new(mission, mpc_sim::controller::ControllerKind::Nmpc),
-                samples: f.samples.clone(),
-                transitions: f.mission.transitions().to_vec(),
-                outcome: if landed {
-                    Outcome::Landed
-                } else {
-                    Outcome::Timeout
-                },
+            let outcome = if landed {
+                Outcome::Landed
+            } else {
+                Outcome::Timeout
+            };
+            let flight = report::Flight {
+                mission: &mission,
+                conditions: Conditions::nominal(),
+                samples: &f.samples,
+                outcome: &outcome,
                 touchdown: f.touchdown,
                 // The pose was lost when the last state before the failsafe came.
                 pose_lost_at: lost.map(|t| t - self.cfg.link.odometry_timeout - f.t0),
                 failsafe_at: self.failsafes.first().map(|(_, t)| t - f.t0),
             };
-            report::summarize_with(&res, &report::Criteria::PX4)
+            report::summarize_flight(&flight, &report::Criteria::PX4)
         });
         FlightReport {
             summary,

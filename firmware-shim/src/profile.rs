@@ -20,8 +20,8 @@
 use std::f64::consts::{FRAC_PI_2, PI};
 use std::path::Path;
 
-use mpc_sim::mission::{G, MissionConfig, MissionKind};
-use mpc_sim::plant::QuadParams;
+use mpc_mission::mission::{G, MissionConfig, MissionKind};
+use mpc_mission::vehicle::QuadParams;
 use serde::{Deserialize, Serialize};
 
 /// PX4 SIH's parameters a profile is read from, in the order of [`VehicleProfile::from_sih`].

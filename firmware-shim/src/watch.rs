@@ -18,7 +18,7 @@
 
 use std::collections::VecDeque;
 
-use mpc_sim::mission::{Phase, RefPoint};
+use mpc_mission::mission::{Phase, RefPoint};
 use nalgebra::Vector3;
 
 use crate::link::Deviation;

@@ -5,7 +5,7 @@
 use std::f64::consts::PI;
 
 use firmware_shim::profile::{FlipPlan, MAX_BRAKE_ANGLE, ProfileError, VehicleProfile, plan_flip};
-use mpc_sim::mission::{G, MissionConfig, MissionKind};
+use mpc_mission::mission::{G, MissionConfig, MissionKind};
 
 /// PX4 v1.16's stock SIH quadrotor: 1 kg, 5 N rotors, 0.2 m lever, Iyy 0.025, 50 ms.
 fn stock() -> VehicleProfile {
@@ -134,7 +134,7 @@ fn a_profile_file_round_trips_and_bad_ones_are_refused_by_field() {
 
 #[test]
 fn the_ramped_flip_reference_tends_to_the_papers_closed_form_as_its_ramps_shorten() {
-    use mpc_sim::mission::{FlipProfile, flip_state, ramped_flip_state};
+    use mpc_mission::mission::{FlipProfile, flip_state, ramped_flip_state};
     use nalgebra::Vector3;
     let (p0, v0) = (Vector3::new(4.0, 0.0, 2.5), Vector3::new(0.0, 0.0, 2.5));
     let rate = 5.0 * PI;

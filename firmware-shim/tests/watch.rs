@@ -5,7 +5,7 @@
 use firmware_shim::link::Deviation;
 use firmware_shim::pilot::State;
 use firmware_shim::watch::{Watch, WatchConfig};
-use mpc_sim::mission::{Phase, RefPoint};
+use mpc_mission::mission::{Phase, RefPoint};
 use nalgebra::{UnitQuaternion, Vector3};
 
 fn state(p: [f64; 3], v: [f64; 3], pitch: f64) -> State {

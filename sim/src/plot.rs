@@ -543,7 +543,6 @@ fn draw_panel(
     let y_data = finite_range(runs.iter().flatten().flatten().map(|p| p.1));
     let (y0, y1) = padded(y_data, 0.06);
 
-    let label_font_px = 15;
     let mut chart = ChartBuilder::on(area)
         .margin_left(10)
         .margin_right(25)
@@ -602,11 +601,43 @@ fn draw_panel(
         ))?;
     }
 
+    let labelled = draw_series(&mut chart, panel, &runs)?;
+    if labelled {
+        let corner = legend_corner(&chart, panel, &runs, LEGEND_FONT_PX);
+        chart
+            .configure_series_labels()
+            .position(corner)
+            .margin(LEGEND_MARGIN as u32)
+            .legend_area_size(LEGEND_SAMPLE as u32)
+            .label_font((FONT, LEGEND_FONT_PX))
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK.mix(0.4))
+            .draw()?;
+    }
+
+    // Phase names, in the top margin of the first panel, where they fit.
+    if top {
+        draw_phase_names(root, &chart, phases, y1)?;
+    }
+    Ok(())
+}
+
+/// A panel's chart: time against the panel's values.
+type PanelChart<'a, 'b> =
+    ChartContext<'a, BitMapBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+/// Draws each series' finite runs in its style, the first run of each labelled for the
+/// legend; whether any series was labelled.
+fn draw_series<'a, 'b: 'a>(
+    chart: &mut PanelChart<'a, 'b>,
+    panel: &PanelSpec,
+    runs: &[Vec<Vec<(f64, f64)>>],
+) -> DrawResult<bool> {
     let mut labelled = false;
-    for (spec, runs) in panel.series.iter().zip(&runs) {
+    for (spec, runs) in panel.series.iter().zip(runs) {
         let color = spec.color;
         for (k, run) in runs.iter().enumerate() {
-            let pts = distinct_pixels(&chart, run);
+            let pts = distinct_pixels(chart, run);
             let line = color.stroke_width(2);
             let anno = match spec.style {
                 // A lone point (a run between NaNs, or a one-sample log) is drawn as a dot.
@@ -644,32 +675,28 @@ fn draw_panel(
             }
         }
     }
-    if labelled {
-        let corner = legend_corner(&chart, panel, &runs, LEGEND_FONT_PX);
-        chart
-            .configure_series_labels()
-            .position(corner)
-            .margin(LEGEND_MARGIN as u32)
-            .legend_area_size(LEGEND_SAMPLE as u32)
-            .label_font((FONT, LEGEND_FONT_PX))
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK.mix(0.4))
-            .draw()?;
-    }
+    Ok(labelled)
+}
 
-    // Phase names, in the top margin of the first panel, where they fit.
-    if top {
-        let style = TextStyle::from((FONT, label_font_px).into_font())
-            .color(&BLACK)
-            .pos(Pos::new(HPos::Left, VPos::Bottom));
-        for (a, b, name) in &phases.intervals {
-            let (xa, ya) = chart.backend_coord(&(*a, y1));
-            let (xb, _) = chart.backend_coord(&(*b, y1));
-            let width = (name.chars().count() as f64 * MONO_ADVANCE_EM * f64::from(label_font_px))
-                .ceil() as i32;
-            if xb - xa >= width + 6 {
-                root.draw(&Text::new(name.as_str(), (xa + 3, ya - 4), style.clone()))?;
-            }
+/// Writes each phase's name above the chart's top edge (at `y1`) where the phase is wide
+/// enough for it.
+fn draw_phase_names(
+    root: &DrawingArea<BitMapBackend<'_>, Shift>,
+    chart: &PanelChart<'_, '_>,
+    phases: &PhaseMarks,
+    y1: f64,
+) -> DrawResult<()> {
+    let label_font_px = 15;
+    let style = TextStyle::from((FONT, label_font_px).into_font())
+        .color(&BLACK)
+        .pos(Pos::new(HPos::Left, VPos::Bottom));
+    for (a, b, name) in &phases.intervals {
+        let (xa, ya) = chart.backend_coord(&(*a, y1));
+        let (xb, _) = chart.backend_coord(&(*b, y1));
+        let width = (name.chars().count() as f64 * MONO_ADVANCE_EM * f64::from(label_font_px))
+            .ceil() as i32;
+        if xb - xa >= width + 6 {
+            root.draw(&Text::new(name.as_str(), (xa + 3, ya - 4), style.clone()))?;
         }
     }
     Ok(())

@@ -75,9 +75,8 @@
 //!
 //! Once the vehicle has crashed, the plant (probe included) is frozen.
 
+use mpc_mission::vehicle::QuadState;
 use nalgebra::Vector3;
-
-use crate::plant::QuadState;
 
 /// Physical parameters of the probe.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -4,12 +4,15 @@ use nalgebra::Vector3;
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 
-use crate::controller::{self, ControllerKind, MassEstimator, OuterStats};
+use crate::controller::{self, ControllerKind, InnerCommand, MassEstimator, OuterStats};
 use crate::estimator::{Estimator, EstimatorConfig};
 use crate::log::Sample;
 use crate::mission::{G, Mission, MissionConfig, MissionInput, Phase, Transition};
 use crate::plant::{Contact, Disturbance, Plant, QuadParams, QuadState};
 use crate::rate_loop::{RateController, RateGains};
+use crate::report::{Conditions, Flight};
+
+pub use mpc_mission::report::{Outcome, Touchdown};
 
 /// A wind gust: the air velocity rises and falls as 1 - cos over `duration`.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -82,6 +85,22 @@ impl SimConfig {
         self
     }
 
+    /// The vehicle and conditions of this configuration, as a trial's summary reports them.
+    pub fn conditions(&self) -> Conditions {
+        Conditions {
+            seed: self.seed,
+            mass_kg: self.plant.mass,
+            inertia: [
+                self.plant.inertia.x,
+                self.plant.inertia.y,
+                self.plant.inertia.z,
+            ],
+            rotor_tau_s: self.plant.rotor_tau,
+            latency_s: self.estimator.latency,
+            gust_m_s: self.gust.map_or(0.0, |g| g.peak.norm()),
+        }
+    }
+
     /// A Monte Carlo draw around this configuration: true mass +-20 %, inertia +-30 % per
     /// axis, rotor time constant 20..40 ms, pose latency 0..10 ms, motion-capture noise, and a
     /// horizontal gust of up to 3 m/s lasting 1..2 s somewhere in the mission.
@@ -110,28 +129,6 @@ impl SimConfig {
     }
 }
 
-/// How a trial ended.
-#[derive(Clone, Debug, PartialEq)]
-pub enum Outcome {
-    /// Landed (touchdown, motors off).
-    Landed,
-    /// Crashed.
-    Crashed(String),
-    /// `t_max` reached in the air.
-    Timeout,
-}
-
-/// A touchdown.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Touchdown {
-    /// Time \[s\].
-    pub t: f64,
-    /// Vertical speed at contact [m/s].
-    pub vertical_speed: f64,
-    /// Where \[m\].
-    pub p: Vector3<f64>,
-}
-
 /// Everything one trial produced.
 #[derive(Clone, Debug)]
 pub struct TrialResult {
@@ -149,6 +146,21 @@ pub struct TrialResult {
     pub pose_lost_at: Option<f64>,
     /// When return mode engaged, if it did \[s\].
     pub failsafe_at: Option<f64>,
+}
+
+impl TrialResult {
+    /// The trial as its summary reads it ([`crate::report::summarize_flight`]).
+    pub fn flight(&self) -> Flight<'_> {
+        Flight {
+            mission: &self.config.mission,
+            conditions: self.config.conditions(),
+            samples: &self.samples,
+            outcome: &self.outcome,
+            touchdown: self.touchdown,
+            pose_lost_at: self.pose_lost_at,
+            failsafe_at: self.failsafe_at,
+        }
+    }
 }
 
 /// A configuration the simulator cannot fly.
@@ -243,22 +255,12 @@ pub fn run_trial(cfg: &SimConfig) -> Result<TrialResult, SimError> {
             rate.reset();
             ([0.0; 4], 0.0)
         } else {
-            let thrust = (mass.mass * cmd.thrust_c).max(0.0);
-            let out = rate.update(&cmd.rates, thrust, &e.w, dt);
-            if on_ground {
-                // No integrator wind-up against the ground.
-                rate.reset();
-            }
-            (out.rotor_cmd, thrust)
+            rate_loop_step(&mut rate, &cmd, mass.mass, &e.w, on_ground, dt)
         };
-        // Accelerometer: specific force along body z, from the true motion.
-        let a_true = (truth.v - v_prev) / dt;
-        v_prev = truth.v;
-        let b3 = truth.q * Vector3::z();
         if !on_ground && i > 0 {
-            let sf = (a_true + Vector3::z() * G).dot(&b3);
-            mass.update(thrust_cmd, sf, b3.z, e.w.norm(), dt);
+            update_mass(&mut mass, &truth, &v_prev, thrust_cmd, &e.w, dt);
         }
+        v_prev = truth.v;
         let wind = cfg.gust.map_or_else(Vector3::zeros, |g| g.wind(t));
         let dist = Disturbance {
             wind,
@@ -319,4 +321,39 @@ pub fn run_trial(cfg: &SimConfig) -> Result<TrialResult, SimError> {
         pose_lost_at,
         failsafe_at: mission.failsafe_since(),
     })
+}
+
+/// One step of the rate loop on the outer loop's command: the rotor commands and the
+/// collective thrust \[N\] (the estimated mass times the commanded acceleration). On the
+/// ground the integrator is reset: no wind-up against the ground.
+fn rate_loop_step(
+    rate: &mut RateController,
+    cmd: &InnerCommand,
+    mass: f64,
+    gyro: &Vector3<f64>,
+    on_ground: bool,
+    dt: f64,
+) -> ([f64; 4], f64) {
+    let thrust = (mass * cmd.thrust_c).max(0.0);
+    let out = rate.update(&cmd.rates, thrust, gyro, dt);
+    if on_ground {
+        rate.reset();
+    }
+    (out.rotor_cmd, thrust)
+}
+
+/// Feeds the mass estimator the accelerometer (the specific force along body z, from the
+/// true motion since the last step's velocity `v_prev`) and the commanded thrust.
+fn update_mass(
+    mass: &mut MassEstimator,
+    truth: &QuadState,
+    v_prev: &Vector3<f64>,
+    thrust: f64,
+    gyro: &Vector3<f64>,
+    dt: f64,
+) {
+    let a_true = (truth.v - v_prev) / dt;
+    let b3 = truth.q * Vector3::z();
+    let sf = (a_true + Vector3::z() * G).dot(&b3);
+    mass.update(thrust, sf, b3.z, gyro.norm(), dt);
 }

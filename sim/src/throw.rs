@@ -392,34 +392,7 @@ pub fn plan_throw(cfg: &ThrowConfig, mq: f64) -> Result<ThrowPlan, ThrowError> {
     let dir = cfg.direction();
     let target = cfg.target();
     let x0 = hover_state(&cfg.throw_point, cfg.yaw);
-    let mut s = Box::new(pm::Solver::new());
-    let set = |s: &mut pm::Solver, r: Result<(), pm::SetError>| -> Result<(), ThrowError> {
-        let _ = s;
-        r.map_err(|e| ThrowError::Invalid(format!("solver rejected a setting: {e:?}")))
-    };
-    let r = s.set_mq(mq);
-    set(&mut s, r)?;
-    let r = s.set_mp(cfg.probe.mass);
-    set(&mut s, r)?;
-    // Planning weights: keep near the throw point, smooth controls, the terminal probe
-    // velocity dominant.
-    let mut qw = [0.0; pm::NX_MODEL];
-    qw[..3].copy_from_slice(&[1.0, 1.0, 1.0]);
-    let mut pw = [0.0; pm::NX_MODEL];
-    pw[1] = 1.0;
-    let r = s.set_q_w(&qw);
-    set(&mut s, r)?;
-    let r = s.set_p_w(&pw);
-    set(&mut s, r)?;
-    let r = s.set_r_w(&[0.01; 4]);
-    set(&mut s, r)?;
-    let r = s.set_w_throw(W_THROW);
-    set(&mut s, r)?;
-    let r = s.set_xref_all(&x0);
-    set(&mut s, r)?;
-    let r = s.set_uref_all(&[G, 0.0, 0.0, 0.0]);
-    set(&mut s, r)?;
-    s.settings_mut().sqp_max_iter = 60;
+    let mut s = planning_solver(cfg, mq, &x0)?;
 
     // First guess of the release point: above and ahead of the throw point.
     let mut rel_p = cfg.throw_point + dir * 0.5 + Vector3::z() * 1.4;
@@ -437,14 +410,11 @@ pub fn plan_throw(cfg: &ThrowConfig, mq: f64) -> Result<ThrowPlan, ThrowError> {
         })?;
         let vwant = dir * plan.velocity[0] + Vector3::z() * plan.velocity[1];
         let vask = vwant * (1.0 + cfg.speed_margin);
-        let r = s.set_vthrow(&[vask.x, vask.y, vask.z]);
-        set(&mut s, r)?;
+        setting(s.set_vthrow(&[vask.x, vask.y, vask.z]))?;
         if rounds == 1 {
-            let r = s.set_guess(&x0, &[G, 0.0, 0.0, 0.0]);
-            set(&mut s, r)?;
+            setting(s.set_guess(&x0, &[G, 0.0, 0.0, 0.0]))?;
         }
-        let r = s.set_x0(&x0);
-        set(&mut s, r)?;
+        setting(s.set_x0(&x0))?;
         let info = s.solve_sqp();
         let xn = s.state(pm::N).unwrap_or(x0);
         let (pp, pv) = probe_of_state(&xn, l);
@@ -474,31 +444,7 @@ pub fn plan_throw(cfg: &ThrowConfig, mq: f64) -> Result<ThrowPlan, ThrowError> {
                     "the release point did not settle in {MAX_ROUNDS} rounds"
                 )));
             }
-            let mut states = Vec::with_capacity(2 * pm::N + 1);
-            let mut controls = Vec::with_capacity(2 * pm::N);
-            for k in 0..=pm::N {
-                states.push(s.state(k).unwrap_or(x0));
-            }
-            for k in 0..pm::N {
-                controls.push(s.control(k).unwrap_or([G, 0.0, 0.0, 0.0]));
-            }
-            // Continuation: the last control held, on the model's own discretization.
-            let p = SVector::from(s.param(pm::N - 1).unwrap_or(pm::P_DEFAULT));
-            let ulast = controls.last().copied().unwrap_or([G, 0.0, 0.0, 0.0]);
-            let mut x = xn;
-            for _ in 0..pm::N {
-                let (mut a, mut b) = (nalgebra::SMatrix::zeros(), nalgebra::SMatrix::zeros());
-                let xs = pm::functions::dynamics(
-                    &SVector::from(x),
-                    &SVector::from(ulast),
-                    &p,
-                    &mut a,
-                    &mut b,
-                );
-                x = xs.into();
-                states.push(x);
-                controls.push(ulast);
-            }
+            let (states, controls) = planned_trajectory(&s, &x0, xn);
             let planned_landing = landing(&pp, &pv).unwrap_or(pp);
             return Ok(ThrowPlan {
                 release: plan,
@@ -519,6 +465,66 @@ pub fn plan_throw(cfg: &ThrowConfig, mq: f64) -> Result<ThrowPlan, ThrowError> {
             });
         }
     }
+}
+
+/// A setting the planning solver refused, as a [`ThrowError::Invalid`].
+fn setting(r: Result<(), pm::SetError>) -> Result<(), ThrowError> {
+    r.map_err(|e| ThrowError::Invalid(format!("solver rejected a setting: {e:?}")))
+}
+
+/// The probe solver set up for planning a throw from hover at `x0`: the masses, and weights
+/// that keep near the throw point with smooth controls and make the terminal probe velocity
+/// dominant; full SQP, at most 60 iterations.
+fn planning_solver(
+    cfg: &ThrowConfig,
+    mq: f64,
+    x0: &[f64; pm::NX_MODEL],
+) -> Result<Box<pm::Solver>, ThrowError> {
+    let mut s = Box::new(pm::Solver::new());
+    setting(s.set_mq(mq))?;
+    setting(s.set_mp(cfg.probe.mass))?;
+    let mut qw = [0.0; pm::NX_MODEL];
+    qw[..3].copy_from_slice(&[1.0, 1.0, 1.0]);
+    let mut pw = [0.0; pm::NX_MODEL];
+    pw[1] = 1.0;
+    setting(s.set_q_w(&qw))?;
+    setting(s.set_p_w(&pw))?;
+    setting(s.set_r_w(&[0.01; 4]))?;
+    setting(s.set_w_throw(W_THROW))?;
+    setting(s.set_xref_all(x0))?;
+    setting(s.set_uref_all(&[G, 0.0, 0.0, 0.0]))?;
+    s.settings_mut().sqp_max_iter = 60;
+    Ok(s)
+}
+
+/// The planned trajectory: the solver's states and controls to the release (stage `N`,
+/// state `xn`), then as many stages more with the last control held, on the model's own
+/// discretization.
+fn planned_trajectory(
+    s: &pm::Solver,
+    x0: &[f64; pm::NX_MODEL],
+    xn: [f64; pm::NX_MODEL],
+) -> (Vec<[f64; pm::NX_MODEL]>, Vec<[f64; 4]>) {
+    let mut states = Vec::with_capacity(2 * pm::N + 1);
+    let mut controls = Vec::with_capacity(2 * pm::N);
+    for k in 0..=pm::N {
+        states.push(s.state(k).unwrap_or(*x0));
+    }
+    for k in 0..pm::N {
+        controls.push(s.control(k).unwrap_or([G, 0.0, 0.0, 0.0]));
+    }
+    let p = SVector::from(s.param(pm::N - 1).unwrap_or(pm::P_DEFAULT));
+    let ulast = controls.last().copied().unwrap_or([G, 0.0, 0.0, 0.0]);
+    let mut x = xn;
+    for _ in 0..pm::N {
+        let (mut a, mut b) = (nalgebra::SMatrix::zeros(), nalgebra::SMatrix::zeros());
+        let xs =
+            pm::functions::dynamics(&SVector::from(x), &SVector::from(ulast), &p, &mut a, &mut b);
+        x = xs.into();
+        states.push(x);
+        controls.push(ulast);
+    }
+    (states, controls)
 }
 
 /// One flip-and-throw trial.
@@ -626,7 +632,35 @@ enum Ref {
     Plan(usize),
 }
 
+impl AfterRelease {
+    /// The schedule after a release at `t`: recover from the estimated state `e` to `hold`
+    /// in `recover_time`, then hold there.
+    fn from(t: f64, e: &Estimate, hold: Vector3<f64>, recover_time: f64) -> Self {
+        let z = Vector3::zeros();
+        Self {
+            t0: t,
+            recover: Segment::Quintic {
+                start: [e.p, e.v, z],
+                end: [hold, z, z],
+                duration: recover_time,
+            },
+            hold,
+        }
+    }
+}
+
 impl Schedule<'_> {
+    /// The position reference at `t`, for the log.
+    fn logged_reference(&self, t: f64) -> Vector3<f64> {
+        match self.reference(t).1 {
+            Ref::Plan(j) => {
+                let x = self.plan.state(j);
+                Vector3::new(x[0], x[1], x[2])
+            }
+            Ref::Point(p) => p.p,
+        }
+    }
+
     fn ascend(&self) -> Segment {
         let z = Vector3::zeros();
         Segment::Quintic {
@@ -786,6 +820,23 @@ impl ThrowController {
         let _ = self.solver.set_r_w(&R_FREE);
     }
 
+    /// One step of the rate loop on the last command: the rotor commands and the
+    /// collective thrust \[N\] for the carried mass `mass`; the thrust the rotors deliver
+    /// follows the command by the model's lag.
+    fn rate_loop_step(
+        &mut self,
+        rate: &mut RateController,
+        mass: f64,
+        gyro: &Vector3<f64>,
+        dt: f64,
+    ) -> ([f64; 4], f64) {
+        let thrust = (mass * self.u[0]).max(0.0);
+        self.thrust += (dt / pm::P_DEFAULT[pm::PARAM_TAU_C.start]) * (self.u[0] - self.thrust);
+        let rates = Vector3::new(self.u[1], self.u[2], self.u[3]);
+        let out = rate.update(&rates, thrust, gyro, dt);
+        (out.rotor_cmd, thrust)
+    }
+
     fn plan_q(&self, k: usize) -> [f64; 4] {
         self.solver
             .state(k.min(pm::N))
@@ -906,13 +957,17 @@ fn landing_with_drag(p: &Vector3<f64>, v: &Vector3<f64>, k: f64) -> Option<Vecto
     None
 }
 
+/// A predicted landing: the landing point, and the probe's position and velocity it was
+/// predicted from.
+type Prediction = (Vector3<f64>, Vector3<f64>, Vector3<f64>);
+
 /// The probe's landing point predicted from the (latency-compensated) estimate and the
 /// encoder, with the probe's drag if it has any; also the probe's position and velocity.
 fn predicted_landing(
     est: &Estimate,
     swing: ([f64; 2], [f64; 2]),
     probe: &ProbeParams,
-) -> Option<(Vector3<f64>, Vector3<f64>, Vector3<f64>)> {
+) -> Option<Prediction> {
     let (p, v) = (est.p, est.v);
     let (ang, dang) = swing;
     let (na, nb) = link_jacobian(ang);
@@ -931,48 +986,24 @@ fn predicted_landing(
 ///
 /// # Errors
 /// [`ThrowError`] if the settings are invalid or the throw cannot be planned.
+// The loop is one simulation step in its order (estimate, release, outer loop, rate loop,
+// log, plant), on state every step shares; its parts are the functions below.
 pub fn run_throw_trial(cfg: &ThrowSimConfig) -> Result<ThrowTrial, ThrowError> {
+    validate_trial(cfg)?;
     let tc = &cfg.throw;
-    tc.validate()?;
-    if !(cfg.dt.is_finite() && cfg.dt > 0.0 && cfg.dt <= 0.002) {
-        return Err(ThrowError::Invalid("dt must be in (0, 0.002] s".into()));
-    }
-    if !(cfg.t_max.is_finite() && cfg.t_max > 0.0 && cfg.t_max <= 3600.0) {
-        return Err(ThrowError::Invalid("t_max must be in (0, 3600] s".into()));
-    }
     let lat = cfg.estimator.latency;
-    if !(lat.is_finite() && (0.0..=0.1).contains(&lat)) {
-        return Err(ThrowError::Invalid(
-            "estimator latency must be in [0, 0.1] s for the throw".into(),
-        ));
-    }
     let mq = cfg.nominal.mass;
     let mp = tc.probe.mass;
     let plan = plan_throw(tc, mq)?;
     let dt = cfg.dt;
-    let dir = tc.direction();
-    let target = plan.target;
 
-    // Hovering at the start, rotor speeds for the total weight, the probe hanging at rest.
-    let mut s0 = QuadState::hovering(tc.start, &cfg.plant);
-    let hover_omega = ((cfg.plant.mass + mp) * cfg.plant.g / (4.0 * cfg.plant.k_thrust)).sqrt();
-    s0.omega = [hover_omega; 4];
-    s0.q = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), tc.yaw);
-    let mut plant = Plant::new(cfg.plant.clone(), s0);
-    plant.attach_probe(tc.probe, [0.0; 2], [0.0; 2]);
+    let mut plant = hanging_at_start(cfg);
     let mut est = Estimator::new(cfg.estimator.clone(), cfg.seed);
-    let mut rng = StdRng::seed_from_u64(cfg.seed ^ 0x7e57_ab1e);
-    let noise = |std: f64| Normal::new(0.0, std.max(0.0)).ok();
-    let (n_ang, n_rate) = (noise(tc.angle_noise), noise(tc.rate_noise));
+    let mut encoder = Encoder::new(tc, cfg.seed);
     let mut rate = RateController::new(&cfg.nominal, cfg.gains.clone());
     let mut ctrl = ThrowController::new(mq, mp);
 
-    let hold_point = tc.hold.unwrap_or_else(|| {
-        let (p, v) = plan.vehicle_at_release;
-        let mut h = p + v * tc.hold_lead;
-        h.z = h.z.max(1.5);
-        h
-    });
+    let hold_point = hold_point(tc, &plan);
     let mut sched = Schedule {
         cfg: tc,
         t_throw: tc.throw_start(),
@@ -980,8 +1011,7 @@ pub fn run_throw_trial(cfg: &ThrowSimConfig) -> Result<ThrowTrial, ThrowError> {
         after: None,
         landed: false,
     };
-    let t_rel_plan = sched.t_throw + plan.release_time();
-    let window = (t_rel_plan - tc.window_before, t_rel_plan + tc.window_after);
+    let mut trigger = Trigger::new(tc, &plan, sched.t_throw);
 
     let mut samples = Vec::with_capacity((cfg.t_max / dt) as usize / 2);
     let mut probe_track = Vec::new();
@@ -993,7 +1023,6 @@ pub fn run_throw_trial(cfg: &ThrowSimConfig) -> Result<ThrowTrial, ThrowError> {
     let mut on_ground = false;
     let mut landed_at: Option<f64> = None;
     let mut pitch_turned = 0.0;
-    let mut prev_along: Option<f64> = None;
     let steps = (cfg.t_max / dt).ceil() as usize;
     for i in 0..=steps {
         let t = i as f64 * dt;
@@ -1001,68 +1030,27 @@ pub fn run_throw_trial(cfg: &ThrowSimConfig) -> Result<ThrowTrial, ThrowError> {
         let e_raw = est.update(t, &truth);
         let acc_world = e_raw.q * plant.specific_acceleration() - Vector3::z() * G;
         let e = compensated(&e_raw, &acc_world, lat);
-        let (ang_true, dang_true) = plant
-            .probe()
-            .map_or(([0.0; 2], [0.0; 2]), |p| (p.ang(), p.dang()));
-        let mut meas = |std: &Option<Normal<f64>>| std.map_or(0.0, |d| d.sample(&mut rng));
-        let swing = (
-            [ang_true[0] + meas(&n_ang), ang_true[1] + meas(&n_ang)],
-            [dang_true[0] + meas(&n_rate), dang_true[1] + meas(&n_rate)],
-        );
+        let swing = encoder.read(&plant);
         let (mut phase, _) = sched.reference(t);
         if transitions.last().map(|x| x.1) != Some(phase) {
             transitions.push((t, phase));
         }
 
         // Release decision (1 kHz).
-        let attached = release_rec.is_none();
-        if phase == Phase::Flip && attached && t >= window.0 {
-            let pred = predicted_landing(&e, swing, &tc.probe);
-            // Release at the step nearest to the crossing: now, if the predicted range is
-            // past the target or closer to it than the next step will be.
-            let along = pred.map(|(lp, _, _)| (lp - target).dot(&dir));
-            let step = match (along, prev_along) {
-                (Some(a), Some(b)) => (a - b).max(0.0),
-                _ => 0.0,
-            };
-            let reached = along.is_some_and(|a| a + 0.5 * step >= 0.0);
-            prev_along = along;
-            let forced = t >= window.1;
-            if reached || forced {
-                let pv_true = plant
-                    .probe()
-                    .map_or(Vector3::zeros(), |p| p.velocity(&truth));
-                let pp_true = plant
-                    .probe()
-                    .map_or(Vector3::zeros(), |p| p.position(&truth));
-                let _ = plant.release_probe();
-                ctrl.release();
-                release_rec = Some(ReleaseRecord {
-                    t,
-                    triggered: reached,
-                    speed_m_s: pv_true.norm(),
-                    angle_rad: pv_true.z.atan2(pv_true.xy().norm()),
-                    height_m: pp_true.z,
-                    vehicle_velocity: [truth.v.x, truth.v.y, truth.v.z],
-                    predicted_landing: pred.map_or([f64::NAN; 3], |(lp, _, _)| [lp.x, lp.y, lp.z]),
-                });
-                probe_track.push([t, pp_true.x, pp_true.y, pp_true.z]);
-                // Recovery from the vehicle's estimated state now.
-                let z = Vector3::zeros();
-                sched.after = Some(AfterRelease {
-                    t0: t,
-                    recover: Segment::Quintic {
-                        start: [e.p, e.v, z],
-                        end: [hold_point, z, z],
-                        duration: tc.recover_time,
-                    },
-                    hold: hold_point,
-                });
-                // The next outer step at once: the plan must change with the mass.
-                next_outer = t;
-                phase = sched.reference(t).0;
-                transitions.push((t, phase));
-            }
+        if phase == Phase::Flip
+            && release_rec.is_none()
+            && let Some((triggered, pred)) = trigger.check(t, &e, swing, &tc.probe)
+        {
+            let (rec, pp_true) = release(&mut plant, &truth, t, triggered, pred);
+            release_rec = Some(rec);
+            ctrl.release();
+            probe_track.push([t, pp_true.x, pp_true.y, pp_true.z]);
+            // Recovery from the vehicle's estimated state now.
+            sched.after = Some(AfterRelease::from(t, &e, hold_point, tc.recover_time));
+            // The next outer step at once: the plan must change with the mass.
+            next_outer = t;
+            phase = sched.reference(t).0;
+            transitions.push((t, phase));
         }
         if on_ground && phase == Phase::Land {
             sched.landed = true;
@@ -1081,23 +1069,12 @@ pub fn run_throw_trial(cfg: &ThrowSimConfig) -> Result<ThrowTrial, ThrowError> {
             rate.reset();
             ([0.0; 4], 0.0)
         } else {
-            let thrust = ((mq + mp_now) * ctrl.u[0]).max(0.0);
-            ctrl.thrust += (dt / pm::P_DEFAULT[pm::PARAM_TAU_C.start]) * (ctrl.u[0] - ctrl.thrust);
-            let rates = Vector3::new(ctrl.u[1], ctrl.u[2], ctrl.u[3]);
-            let out = rate.update(&rates, thrust, &e.w, dt);
-            (out.rotor_cmd, thrust)
+            ctrl.rate_loop_step(&mut rate, mq + mp_now, &e.w, dt)
         };
         if phase == Phase::Flip || release_rec.is_some() {
             pitch_turned += truth.w.y * dt;
         }
-        let (_, r) = sched.reference(t);
-        let rp = match r {
-            Ref::Plan(j) => {
-                let x = plan.state(j);
-                Vector3::new(x[0], x[1], x[2])
-            }
-            Ref::Point(p) => p.p,
-        };
+        let rp = sched.logged_reference(t);
         let stats = pending.take();
         let fs = plant.rotor_thrusts();
         samples.push(Sample {
@@ -1153,6 +1130,159 @@ pub fn run_throw_trial(cfg: &ThrowSimConfig) -> Result<ThrowTrial, ThrowError> {
         hold_point,
         plan,
     })
+}
+
+/// The hold point after the release: the configured one, or where the vehicle will be
+/// `hold_lead` seconds after the planned release at its velocity then (at least 1.5 m up).
+fn hold_point(tc: &ThrowConfig, plan: &ThrowPlan) -> Vector3<f64> {
+    tc.hold.unwrap_or_else(|| {
+        let (p, v) = plan.vehicle_at_release;
+        let mut h = p + v * tc.hold_lead;
+        h.z = h.z.max(1.5);
+        h
+    })
+}
+
+/// Checks the settings a throw trial depends on.
+fn validate_trial(cfg: &ThrowSimConfig) -> Result<(), ThrowError> {
+    cfg.throw.validate()?;
+    if !(cfg.dt.is_finite() && cfg.dt > 0.0 && cfg.dt <= 0.002) {
+        return Err(ThrowError::Invalid("dt must be in (0, 0.002] s".into()));
+    }
+    if !(cfg.t_max.is_finite() && cfg.t_max > 0.0 && cfg.t_max <= 3600.0) {
+        return Err(ThrowError::Invalid("t_max must be in (0, 3600] s".into()));
+    }
+    let lat = cfg.estimator.latency;
+    if !(lat.is_finite() && (0.0..=0.1).contains(&lat)) {
+        return Err(ThrowError::Invalid(
+            "estimator latency must be in [0, 0.1] s for the throw".into(),
+        ));
+    }
+    Ok(())
+}
+
+/// The plant at the start: hovering at the start point with the rotor speeds for the total
+/// weight, at the throw's heading, the probe hanging at rest.
+fn hanging_at_start(cfg: &ThrowSimConfig) -> Plant {
+    let tc = &cfg.throw;
+    let mut s0 = QuadState::hovering(tc.start, &cfg.plant);
+    let hover_omega =
+        ((cfg.plant.mass + tc.probe.mass) * cfg.plant.g / (4.0 * cfg.plant.k_thrust)).sqrt();
+    s0.omega = [hover_omega; 4];
+    s0.q = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), tc.yaw);
+    let mut plant = Plant::new(cfg.plant.clone(), s0);
+    plant.attach_probe(tc.probe, [0.0; 2], [0.0; 2]);
+    plant
+}
+
+/// The link's encoder: the true swing angles and rates with the configured noise, from its
+/// own random stream.
+struct Encoder {
+    rng: StdRng,
+    angle: Option<Normal<f64>>,
+    rate: Option<Normal<f64>>,
+}
+
+impl Encoder {
+    fn new(tc: &ThrowConfig, seed: u64) -> Self {
+        let noise = |std: f64| Normal::new(0.0, std.max(0.0)).ok();
+        Self {
+            rng: StdRng::seed_from_u64(seed ^ 0x7e57_ab1e),
+            angle: noise(tc.angle_noise),
+            rate: noise(tc.rate_noise),
+        }
+    }
+
+    /// The measured swing (angles, rates); zero once the probe is gone.
+    fn read(&mut self, plant: &Plant) -> ([f64; 2], [f64; 2]) {
+        let (ang_true, dang_true) = plant
+            .probe()
+            .map_or(([0.0; 2], [0.0; 2]), |p| (p.ang(), p.dang()));
+        let rng = &mut self.rng;
+        let mut meas = |std: &Option<Normal<f64>>| std.map_or(0.0, |d| d.sample(rng));
+        let (n_ang, n_rate) = (self.angle, self.rate);
+        (
+            [ang_true[0] + meas(&n_ang), ang_true[1] + meas(&n_ang)],
+            [dang_true[0] + meas(&n_rate), dang_true[1] + meas(&n_rate)],
+        )
+    }
+}
+
+/// The release trigger: within the window around the planned release, fire at the step
+/// nearest to the crossing of the target by the predicted landing point, or at the end of
+/// the window.
+struct Trigger {
+    window: (f64, f64),
+    target: Vector3<f64>,
+    dir: Vector3<f64>,
+    /// The predicted landing's distance past the target at the last step \[m\].
+    prev_along: Option<f64>,
+}
+
+impl Trigger {
+    fn new(tc: &ThrowConfig, plan: &ThrowPlan, t_throw: f64) -> Self {
+        let t_rel_plan = t_throw + plan.release_time();
+        Self {
+            window: (t_rel_plan - tc.window_before, t_rel_plan + tc.window_after),
+            target: plan.target,
+            dir: tc.direction(),
+            prev_along: None,
+        }
+    }
+
+    /// At time `t` in the flip, with the probe attached: `Some` (whether the trigger fired
+    /// rather than the window ended, the prediction) when the probe is to be released now.
+    fn check(
+        &mut self,
+        t: f64,
+        e: &Estimate,
+        swing: ([f64; 2], [f64; 2]),
+        probe: &ProbeParams,
+    ) -> Option<(bool, Option<Prediction>)> {
+        if t < self.window.0 {
+            return None;
+        }
+        let pred = predicted_landing(e, swing, probe);
+        // Release at the step nearest to the crossing: now, if the predicted range is
+        // past the target or closer to it than the next step will be.
+        let along = pred.map(|(lp, _, _)| (lp - self.target).dot(&self.dir));
+        let step = match (along, self.prev_along) {
+            (Some(a), Some(b)) => (a - b).max(0.0),
+            _ => 0.0,
+        };
+        let reached = along.is_some_and(|a| a + 0.5 * step >= 0.0);
+        self.prev_along = along;
+        let forced = t >= self.window.1;
+        (reached || forced).then_some((reached, pred))
+    }
+}
+
+/// Releases the probe at `t`: the record (the true probe's speed, angle and height, the
+/// vehicle's velocity, the landing predicted) and the probe's true position.
+fn release(
+    plant: &mut Plant,
+    truth: &QuadState,
+    t: f64,
+    triggered: bool,
+    pred: Option<Prediction>,
+) -> (ReleaseRecord, Vector3<f64>) {
+    let pv_true = plant
+        .probe()
+        .map_or(Vector3::zeros(), |p| p.velocity(truth));
+    let pp_true = plant
+        .probe()
+        .map_or(Vector3::zeros(), |p| p.position(truth));
+    let _ = plant.release_probe();
+    let rec = ReleaseRecord {
+        t,
+        triggered,
+        speed_m_s: pv_true.norm(),
+        angle_rad: pv_true.z.atan2(pv_true.xy().norm()),
+        height_m: pp_true.z,
+        vehicle_velocity: [truth.v.x, truth.v.y, truth.v.z],
+        predicted_landing: pred.map_or([f64::NAN; 3], |(lp, _, _)| [lp.x, lp.y, lp.z]),
+    };
+    (rec, pp_true)
 }
 
 /// The figures of one flip-and-throw trial.
@@ -1226,24 +1356,7 @@ pub fn summarize_throw(tr: &ThrowTrial) -> ThrowSummary {
         .filter(|s| s.t >= t_throw && s.t <= t_hold_end)
         .collect();
     let min_alt = window.iter().map(|s| s.z).fold(f64::INFINITY, f64::min);
-    let recovery = rel.and_then(|r| {
-        let rows: Vec<&Sample> = tr
-            .samples
-            .iter()
-            .filter(|s| s.t >= r.t && s.t <= t_hold_end)
-            .collect();
-        let pos = |s: &Sample| Vector3::new(s.x, s.y, s.z);
-        let last = rows.last()?;
-        if (pos(last) - tr.hold_point).norm() >= THROW_RECOVERY_TOL_M {
-            return None;
-        }
-        let last_out = rows
-            .iter()
-            .rev()
-            .find(|s| (pos(s) - tr.hold_point).norm() >= THROW_RECOVERY_TOL_M)
-            .map_or(r.t, |s| s.t);
-        Some(last_out - r.t)
-    });
+    let recovery = rel.and_then(|r| throw_recovery(tr, r.t, t_hold_end));
     let landing = tr.probe_landing.map(|(_, p)| p);
     let err = landing.map(|p| (p - target).xy().norm());
     let achieved = landing.map(|p| (p - start).xy().norm());
@@ -1255,45 +1368,7 @@ pub fn summarize_throw(tr: &ThrowTrial) -> ThrowSummary {
             (q * Vector3::z()).z.clamp(-1.0, 1.0).acos()
         })
         .fold(0.0, f64::max);
-    let mut failures = Vec::new();
-    if tr.outcome != "landed" {
-        failures.push(format!("the vehicle did not land: {}", tr.outcome));
-    }
-    match rel {
-        None => failures.push("the probe was not released".into()),
-        Some(r) if !r.triggered => failures.push(format!(
-            "the predicted range never reached the target; released at the window's end \
-             (t = {:.3} s)",
-            r.t
-        )),
-        Some(_) => {}
-    }
-    match err {
-        None => failures.push("the probe did not land".into()),
-        Some(e) if e > LANDING_TOL_M => failures.push(format!(
-            "the probe landed {e:.2} m from the target (limit {LANDING_TOL_M} m)"
-        )),
-        Some(_) => {}
-    }
-    if let Some(t) = tr.probe_struck {
-        failures.push(format!(
-            "the probe hit the ground while attached at t = {t:.2} s"
-        ));
-    }
-    match recovery {
-        None => failures.push(format!(
-            "the vehicle did not settle within {THROW_RECOVERY_TOL_M} m of the hold point"
-        )),
-        Some(t) if t > THROW_RECOVERY_MAX_S => failures.push(format!(
-            "recovery took {t:.2} s (limit {THROW_RECOVERY_MAX_S} s)"
-        )),
-        Some(_) => {}
-    }
-    if min_alt < THROW_MIN_ALTITUDE_M {
-        failures.push(format!(
-            "the vehicle went down to {min_alt:.2} m (limit {THROW_MIN_ALTITUDE_M} m)"
-        ));
-    }
+    let failures = judge_throw(tr, err, recovery, min_alt);
     let solver = TimeStats::of(tr.samples.iter().map(|s| s.solver_us));
     let iters: Vec<f64> = tr
         .samples
@@ -1333,6 +1408,77 @@ pub fn summarize_throw(tr: &ThrowTrial) -> ThrowSummary {
             iters.iter().sum::<f64>() / iters.len() as f64
         },
     }
+}
+
+/// The time from the release at `t_rel` until the vehicle is within
+/// [`THROW_RECOVERY_TOL_M`] of the hold point for good, judged up to `t_hold_end`.
+fn throw_recovery(tr: &ThrowTrial, t_rel: f64, t_hold_end: f64) -> Option<f64> {
+    let rows: Vec<&Sample> = tr
+        .samples
+        .iter()
+        .filter(|s| s.t >= t_rel && s.t <= t_hold_end)
+        .collect();
+    let pos = |s: &Sample| Vector3::new(s.x, s.y, s.z);
+    let last = rows.last()?;
+    if (pos(last) - tr.hold_point).norm() >= THROW_RECOVERY_TOL_M {
+        return None;
+    }
+    let last_out = rows
+        .iter()
+        .rev()
+        .find(|s| (pos(s) - tr.hold_point).norm() >= THROW_RECOVERY_TOL_M)
+        .map_or(t_rel, |s| s.t);
+    Some(last_out - t_rel)
+}
+
+/// The criteria a throw trial fails, in words: the vehicle's landing, the release, the
+/// probe's landing error `err`, the recovery and the lowest height `min_alt`.
+fn judge_throw(
+    tr: &ThrowTrial,
+    err: Option<f64>,
+    recovery: Option<f64>,
+    min_alt: f64,
+) -> Vec<String> {
+    let mut failures = Vec::new();
+    if tr.outcome != "landed" {
+        failures.push(format!("the vehicle did not land: {}", tr.outcome));
+    }
+    match tr.release {
+        None => failures.push("the probe was not released".into()),
+        Some(r) if !r.triggered => failures.push(format!(
+            "the predicted range never reached the target; released at the window's end \
+             (t = {:.3} s)",
+            r.t
+        )),
+        Some(_) => {}
+    }
+    match err {
+        None => failures.push("the probe did not land".into()),
+        Some(e) if e > LANDING_TOL_M => failures.push(format!(
+            "the probe landed {e:.2} m from the target (limit {LANDING_TOL_M} m)"
+        )),
+        Some(_) => {}
+    }
+    if let Some(t) = tr.probe_struck {
+        failures.push(format!(
+            "the probe hit the ground while attached at t = {t:.2} s"
+        ));
+    }
+    match recovery {
+        None => failures.push(format!(
+            "the vehicle did not settle within {THROW_RECOVERY_TOL_M} m of the hold point"
+        )),
+        Some(t) if t > THROW_RECOVERY_MAX_S => failures.push(format!(
+            "recovery took {t:.2} s (limit {THROW_RECOVERY_MAX_S} s)"
+        )),
+        Some(_) => {}
+    }
+    if min_alt < THROW_MIN_ALTITUDE_M {
+        failures.push(format!(
+            "the vehicle went down to {min_alt:.2} m (limit {THROW_MIN_ALTITUDE_M} m)"
+        ));
+    }
+    failures
 }
 
 /// The landing errors of a run.

@@ -333,15 +333,18 @@ fn invalid_configurations_are_refused_with_the_setting_named() {
     }
 }
 
+/// A flight through PX4 is summarized with the conditions of the simulator's nominal trial.
 #[test]
-fn the_nmpcs_thrust_limit_is_validated_and_kept() {
-    use mpc_sim::controller::NmpcController;
-    let mut c = NmpcController::new();
-    assert_eq!(c.thrust_limit(), 20.0, "the model's bound");
-    c.set_thrust_limit(14.5).unwrap();
-    assert_eq!(c.thrust_limit(), 14.5);
-    for bad in [f64::NAN, f64::INFINITY, -1.0] {
-        assert!(c.set_thrust_limit(bad).is_err(), "{bad}");
-        assert_eq!(c.thrust_limit(), 14.5, "unchanged after {bad}");
-    }
+fn the_nominal_conditions_are_those_of_the_default_trial() {
+    use mpc_sim::report::Conditions;
+    let c = flip(ControllerKind::Nmpc, 0);
+    assert_eq!(c.conditions(), Conditions::nominal());
+    assert_eq!(
+        SimConfig::new(
+            MissionConfig::for_kind(mpc_sim::mission::MissionKind::Hover),
+            ControllerKind::Paper
+        )
+        .conditions(),
+        Conditions::nominal()
+    );
 }

@@ -3,9 +3,9 @@
 
 use firmware_shim::link::{Failsafe, LinkConfig, Phase, Session};
 use firmware_shim::messages::{self, Inbound, OdometryNed, Px4Mode, classify, decode, encode};
-use firmware_shim::sitl::{Commander, CommanderConfig, Control, VehicleStatus};
 use mavlink::MavHeader;
 use mavlink::dialects::common::{MavMessage, MavResult};
+use px4_sim::commander::{Commander, CommanderConfig, Control, VehicleStatus};
 
 const GROUND: VehicleStatus = VehicleStatus {
     pose_valid: true,
@@ -160,7 +160,7 @@ fn px4_disarms_two_seconds_after_landed_in_any_mode_once_it_has_flown() {
 /// PX4's `Hysteresis` as the land detector uses it: true after the delay, false at once.
 #[test]
 fn hysteresis_switches_on_after_its_delay_and_off_at_once() {
-    use firmware_shim::sitl::Hysteresis;
+    use px4_sim::commander::Hysteresis;
     let mut h = Hysteresis::new(false, 1.0);
     assert!(!h.update(true, 0.0));
     assert!(!h.update(true, 0.99));
@@ -174,8 +174,8 @@ fn hysteresis_switches_on_after_its_delay_and_off_at_once() {
     assert!(h.update(true, 3.6));
 }
 
-fn detector_input(thrust: f64, vz: f64) -> firmware_shim::sitl::LandDetectorInput {
-    firmware_shim::sitl::LandDetectorInput {
+fn detector_input(thrust: f64, vz: f64) -> px4_sim::commander::LandDetectorInput {
+    px4_sim::commander::LandDetectorInput {
         armed: true,
         thrust,
         hover_thrust: 0.5,
@@ -189,8 +189,8 @@ fn detector_input(thrust: f64, vz: f64) -> firmware_shim::sitl::LandDetectorInpu
 
 /// Runs a fresh armed detector on `input` for `seconds` at 1 kHz after one airborne update;
 /// returns when it first said landed.
-fn landed_after(input: firmware_shim::sitl::LandDetectorInput, seconds: f64) -> Option<f64> {
-    use firmware_shim::sitl::{LandDetector, LandDetectorConfig};
+fn landed_after(input: px4_sim::commander::LandDetectorInput, seconds: f64) -> Option<f64> {
+    use px4_sim::commander::{LandDetector, LandDetectorConfig};
     let mut d = LandDetector::new(LandDetectorConfig::default());
     // Airborne: full thrust, climbing.
     assert!(!d.update(0.0, &detector_input(0.6, 1.0)));
@@ -203,7 +203,7 @@ fn landed_after(input: firmware_shim::sitl::LandDetectorInput, seconds: f64) -> 
 /// landed (minimal thrust, no rotation), landed, each a third of LNDMC_TRIG_TIME (1 s).
 #[test]
 fn the_land_detector_says_landed_one_second_after_ground_contact() {
-    use firmware_shim::sitl::{LandDetector, LandDetectorConfig};
+    use px4_sim::commander::{LandDetector, LandDetectorConfig};
     // OFFBOARD (no climb-rate control): thrust at most MPC_MANTHR_MIN + 0.01 = 0.09.
     let t = landed_after(detector_input(0.05, 0.0), 3.0).expect("landed");
     assert!((t - 1.0).abs() < 0.005, "{t}");
@@ -217,24 +217,24 @@ fn the_land_detector_says_landed_one_second_after_ground_contact() {
         None,
         "sinking"
     );
-    let rotating = firmware_shim::sitl::LandDetectorInput {
+    let rotating = px4_sim::commander::LandDetectorInput {
         rate_xy: 0.5,
         ..detector_input(0.05, 0.0)
     };
     assert_eq!(landed_after(rotating, 3.0), None, "rotating");
-    let sliding = firmware_shim::sitl::LandDetectorInput {
+    let sliding = px4_sim::commander::LandDetectorInput {
         v_xy: 2.0,
         ..detector_input(0.05, 0.0)
     };
     assert_eq!(landed_after(sliding, 3.0), None, "sliding");
     // PX4's position control: ground contact needs a commanded descent, and the thrust
     // threshold is MPC_THR_MIN + 0.1 (MPC_THR_HOVER - MPC_THR_MIN) = 0.158.
-    let hold = firmware_shim::sitl::LandDetectorInput {
+    let hold = px4_sim::commander::LandDetectorInput {
         climb_rate_control: true,
         ..detector_input(0.15, 0.0)
     };
     assert_eq!(landed_after(hold, 3.0), None, "holding");
-    let land = firmware_shim::sitl::LandDetectorInput {
+    let land = px4_sim::commander::LandDetectorInput {
         descending: true,
         ..hold
     };
@@ -256,7 +256,7 @@ fn the_land_detector_says_landed_one_second_after_ground_contact() {
     let mut d = LandDetector::new(LandDetectorConfig::default());
     assert!(d.update(0.0, &detector_input(0.05, 0.0)), "starts landed");
     assert!(!d.update(0.001, &detector_input(0.3, 0.0)));
-    let disarmed = firmware_shim::sitl::LandDetectorInput {
+    let disarmed = px4_sim::commander::LandDetectorInput {
         armed: false,
         ..detector_input(0.9, 3.0)
     };
@@ -382,8 +382,8 @@ fn the_session_flies_the_simulated_px4_and_notices_its_failsafe() {
 /// not support (param3, param4, param7 not 0).
 #[test]
 fn set_message_interval_sets_the_stream_rates_as_px4() {
-    use firmware_shim::sitl::{MessageInterval, STREAMED_MESSAGES};
     use mavlink::dialects::common::{COMMAND_LONG_DATA, MavCmd};
+    use px4_sim::commander::{MessageInterval, STREAMED_MESSAGES};
     let cmd = |p1: f32, p2: f32, p3: f32, p7: f32| {
         MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
             param1: p1,

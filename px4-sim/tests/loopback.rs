@@ -10,7 +10,7 @@ use std::time::{Duration, Instant};
 use firmware_shim::link::{LinkConfig, Phase, Session};
 use firmware_shim::messages::{self, Inbound, Px4Mode, classify};
 use firmware_shim::transport::Link;
-use firmware_shim::vehicle::{SimVehicle, VehicleConfig, serve};
+use px4_sim::vehicle::{SimVehicle, VehicleConfig, serve};
 
 mod support;
 

@@ -1,5 +1,7 @@
-//! A fault-injecting UDP relay, for testing the MAVLink link between a simulated PX4 and the
-//! companion over real sockets.
+//! `mav-relay`: a fault-injecting UDP relay, for testing the MAVLink link between a
+//! simulated PX4 and the companion over real sockets. A crate of its own: it is a tool of the
+//! tests, neither the shim that flies PX4 nor the simulated PX4, and it needs nothing of
+//! either (only the `mavlink` crate, to decode what its hooks look at).
 //!
 //! ```text
 //!              listen_addr                          forward_addr
@@ -38,7 +40,7 @@
 //! a transient one ends the thread early; it is reported in [`RelayStats::failure`].
 //!
 //! ```
-//! use firmware_shim::relay::{Relay, RelayConfig, RelayHooks};
+//! use mav_relay::{Relay, RelayConfig, RelayHooks};
 //! use mavlink::dialects::common::MavMessage;
 //! use std::time::Duration;
 //!

@@ -3,7 +3,7 @@
 use serde::Serialize;
 
 use crate::controller::OuterStats;
-use crate::plant::QuadState;
+use crate::vehicle::QuadState;
 
 /// One row of the closed-loop log (and of the CSV file, in this column order).
 ///
@@ -65,7 +65,7 @@ pub struct Sample {
     pub thrust_cmd: f64,
     /// Actual collective thrust of the four rotors \[N\].
     pub thrust: f64,
-    /// Rotor 1 thrust \[N\] (numbering: see [`crate::plant`]).
+    /// Rotor 1 thrust \[N\] (numbering: see [`crate::vehicle::QuadParams::rotor_positions`]).
     pub f1: f64,
     /// Rotor 2 thrust \[N\].
     pub f2: f64,

@@ -25,7 +25,7 @@ use std::time::Instant;
 
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
-use crate::estimator::Estimate;
+use crate::estimate::Estimate;
 use crate::mission::{G, Mission, RefPoint};
 
 /// What the outer loop hands to the rate loop at each inner step.

@@ -7,14 +7,14 @@ use std::f64::consts::PI;
 
 use firmware_shim::frames::{quat_enu_flu_to_ned_frd, quat_from_mavlink, quat_ned_frd_to_enu_flu};
 use firmware_shim::messages::{self, Command, Inbound, Px4Mode, classify};
-use firmware_shim::sitl::CommanderConfig;
-use firmware_shim::vehicle::{AttitudeGains, SimVehicle, VehicleConfig, attitude_control};
 use mavlink::MavHeader;
 use mavlink::dialects::common::{self as mc, MavCmd, MavMessage, MavResult};
-use mpc_sim::estimator::EstimatorConfig;
-use mpc_sim::plant::{QuadParams, RotorLag};
+use mpc_mission::estimate::EstimatorConfig;
+use mpc_mission::vehicle::{QuadParams, RotorLag};
 use mpc_sim::rate_loop::Airmode;
 use nalgebra::{UnitQuaternion, Vector3};
+use px4_sim::commander::CommanderConfig;
+use px4_sim::vehicle::{AttitudeGains, SimVehicle, VehicleConfig, attitude_control};
 
 const PX4: MavHeader = MavHeader {
     system_id: 1,
@@ -558,7 +558,7 @@ fn stamps(out: &[MavMessage]) -> Vec<f64> {
 /// either way; TIMESYNC answers with the same clock.
 #[test]
 fn the_clock_jumps_as_configured_and_every_timestamp_follows() {
-    use firmware_shim::vehicle::ClockJump;
+    use px4_sim::vehicle::ClockJump;
     for by in [-0.5, 30.0] {
         let mut v = exact(VehicleConfig {
             clock_jump: Some(ClockJump { at: 1.0, by }),
@@ -605,7 +605,7 @@ fn timesync_requests_are_answered_with_the_vehicle_clock() {
 /// to give.
 #[test]
 fn bad_clock_and_bias_settings_are_refused_with_what_to_give() {
-    use firmware_shim::vehicle::{Airframe, ClockJump, VehicleConfigError};
+    use px4_sim::vehicle::{Airframe, ClockJump, VehicleConfigError};
     let cfg = VehicleConfig::default();
     assert_eq!(
         cfg.clock_rate, 0.988,

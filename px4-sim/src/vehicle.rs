@@ -1,4 +1,4 @@
-//! The simulated PX4 vehicle: the [`crate::sitl::Commander`] around the simulator's plant
+//! The simulated PX4 vehicle: the [`crate::commander::Commander`] around the simulator's plant
 //! and PX4-like rate loop (`mpc-sim`), speaking MAVLink messages in PX4's frames; `mpcc sitl`
 //! serves it on a link with [`serve`].
 //!
@@ -22,7 +22,7 @@
 //!   keeps the torque, as PX4's airmode).
 //! * Out: PX4's HEARTBEAT (1 Hz) and what PX4 streams on its onboard link, at PX4's default
 //!   rates unless the companion changes them with MAV_CMD_SET_MESSAGE_INTERVAL
-//!   ([`crate::sitl`]): ODOMETRY (30 Hz, LOCAL_NED / LOCAL_NED), LOCAL_POSITION_NED (30 Hz),
+//!   ([`crate::commander`]): ODOMETRY (30 Hz, LOCAL_NED / LOCAL_NED), LOCAL_POSITION_NED (30 Hz),
 //!   ATTITUDE_QUATERNION (50 Hz, NED -> FRD, FRD rates), EXTENDED_SYS_STATE (5 Hz, the
 //!   land detector's verdict), and the commander's COMMAND_ACKs. The defaults are
 //!   [`VehicleConfig`] fields. Answers: TIMESYNC (a request, `tc1` = 0, gets the vehicle's
@@ -36,7 +36,7 @@
 //! * The estimate: the estimator's noise and latency, plus EKF2's height error with GNSS
 //!   height, ramping from 0 at the first arming to [`VehicleConfig::height_bias`] over
 //!   [`HEIGHT_BIAS_RAMP`] s; PX4's own modes fly on it; the record stays true.
-//! * PX4's land detector ([`crate::sitl::LandDetector`]) on the estimate and the commanded
+//! * PX4's land detector ([`crate::commander::LandDetector`]) on the estimate and the commanded
 //!   thrust: its verdict is EXTENDED_SYS_STATE's landed state, the commander's arming and
 //!   disarming checks and its automatic disarm 2 s after landing, in any mode.
 //! * The airframe ([`Airframe`]): the simulator's agile design vehicle (default) or PX4's
@@ -45,18 +45,22 @@
 //!   arming, the pitch rotation flown in OFFBOARD), kept at every 1 ms step, for the
 //!   summary of `mpcc sitl`.
 
+use firmware_shim::frames::{
+    enu_to_ned, flu_to_frd, frd_to_flu, quat_enu_flu_to_ned_frd, quat_to_mavlink,
+};
+use firmware_shim::messages::Px4Mode;
+use firmware_shim::setpoint::ThrustMap;
 use mavlink::MessageData;
 use mavlink::dialects::common::{self as mc, MavFrame, MavLandedState, MavMessage, MavVtolState};
-use mpc_sim::estimator::{Estimate, Estimator, EstimatorConfig};
-use mpc_sim::mission::attitude_from_thrust;
-use mpc_sim::plant::{Contact, Disturbance, Plant, QuadParams, QuadState};
+use mpc_mission::estimate::{Estimate, EstimatorConfig};
+use mpc_mission::mission::attitude_from_thrust;
+use mpc_mission::vehicle::{QuadParams, QuadState};
+use mpc_sim::estimator::Estimator;
+use mpc_sim::plant::{Contact, Disturbance, Plant};
 use mpc_sim::rate_loop::{Airmode, GyroFilter, RateController, RateGains, px4_torque_per_command};
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 
-use crate::frames::{enu_to_ned, flu_to_frd, frd_to_flu, quat_enu_flu_to_ned_frd, quat_to_mavlink};
-use crate::messages::Px4Mode;
-use crate::setpoint::ThrustMap;
-use crate::sitl::{
+use crate::commander::{
     Commander, CommanderConfig, Control, LandDetector, LandDetectorConfig, LandDetectorInput,
     MessageInterval, STREAMED_MESSAGES, VehicleStatus,
 };
@@ -879,7 +883,7 @@ impl SimVehicle {
         let found = if r.param_index < 0 {
             table
                 .iter()
-                .position(|(n, _)| crate::messages::param_name_is(&r.param_id.into(), n))
+                .position(|(n, _)| firmware_shim::messages::param_name_is(&r.param_id.into(), n))
         } else {
             usize::try_from(r.param_index)
                 .ok()
@@ -1293,7 +1297,7 @@ fn odometry(e: &Estimate, t: f64) -> MavMessage {
 /// Sending before anyone has been heard on a `udpin` link fails; such messages are dropped
 /// (PX4 does the same until a client appears). Returns the number of messages received.
 pub fn serve(
-    link: &crate::transport::Link,
+    link: &firmware_shim::transport::Link,
     vehicle: &mut SimVehicle,
     duration: f64,
     stop: &std::sync::atomic::AtomicBool,
@@ -1304,7 +1308,7 @@ pub fn serve(
 /// [`serve`], calling `on_tick` after every 4 ms step (to report progress); serving ends
 /// early when it returns false.
 pub fn serve_with(
-    link: &crate::transport::Link,
+    link: &firmware_shim::transport::Link,
     vehicle: &mut SimVehicle,
     duration: f64,
     stop: &std::sync::atomic::AtomicBool,

@@ -2,7 +2,7 @@
 
 use core::f64::consts::PI;
 
-use mpc_sim::mission::{
+use mpc_mission::mission::{
     G, Mission, MissionConfig, MissionInput, MissionKind, Phase, attitude_from_thrust, flip_state,
 };
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};

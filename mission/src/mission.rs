@@ -768,76 +768,19 @@ impl Mission {
         if !inp.on_ground {
             self.airborne = true;
         }
-        // Failsafe: pose lost for longer than the timeout while flying.
         if inp.pose_valid {
             self.pose_lost_since = None;
         } else if self.pose_lost_since.is_none() {
             self.pose_lost_since = Some(t);
         }
-        if self.failsafe.is_none()
-            && self.airborne
-            && !matches!(self.phase, Phase::Land | Phase::Landed)
-            && self
-                .pose_lost_since
-                .is_some_and(|t0| t - t0 >= self.cfg.pose_timeout)
-        {
-            self.failsafe = Some(t);
-            self.enter(t, Phase::ReturnHome);
-            let alt = inp.p.z.max(self.cfg.takeoff_point.z) + self.cfg.failsafe_climb;
-            let climb = Vector3::new(inp.p.x, inp.p.y, alt);
-            let home_hi = Vector3::new(self.cfg.home.x, self.cfg.home.y, alt);
-            let dist = (home_hi - climb).norm();
-            let ret = self.cfg.return_time.max(dist / 1.5);
-            let t1 = t + self.cfg.failsafe_climb_time;
-            let t2 = t1 + ret;
-            let mut plan = vec![
-                PlanSeg {
-                    phase: Phase::ReturnHome,
-                    t0: t,
-                    seg: Segment::Quintic {
-                        start: [inp.p, inp.v, Vector3::zeros()],
-                        end: [climb, Vector3::zeros(), Vector3::zeros()],
-                        duration: self.cfg.failsafe_climb_time,
-                    },
-                },
-                PlanSeg {
-                    phase: Phase::ReturnHome,
-                    t0: t1,
-                    seg: Self::quintic_rest(climb, home_hi, ret),
-                },
-            ];
-            plan.extend(self.landing(t2 + self.cfg.settle_time, home_hi));
-            self.replan(plan);
+        if self.pose_failsafe_due(t) {
+            self.start_failsafe_return(inp);
             return self.phase;
         }
         let elapsed = t - self.phase_start;
         let here = self.reference(t);
         match self.phase {
-            Phase::Takeoff => {
-                let target = self.cfg.takeoff_point;
-                if self.settled(inp, &target, elapsed, self.cfg.takeoff_time) {
-                    match self.cfg.kind {
-                        MissionKind::Flip => {
-                            self.enter(t, Phase::Rally);
-                            let rp = self.cfg.rally_point;
-                            let seg = Self::quintic_rest(target, rp, self.cfg.rally_time);
-                            self.replan(vec![PlanSeg {
-                                phase: Phase::Rally,
-                                t0: t,
-                                seg,
-                            }]);
-                        }
-                        MissionKind::Hover | MissionKind::Step => {
-                            self.enter(t, Phase::Hold);
-                            self.replan(vec![PlanSeg {
-                                phase: Phase::Hold,
-                                t0: t,
-                                seg: Segment::Hold(target),
-                            }]);
-                        }
-                    }
-                }
-            }
+            Phase::Takeoff => self.after_takeoff(inp, elapsed),
             Phase::Rally => {
                 let rp = self.cfg.rally_point;
                 if self.settled(inp, &rp, elapsed, self.cfg.rally_time) {
@@ -851,66 +794,142 @@ impl Mission {
                     self.enter(t, here.phase);
                 }
             }
-            Phase::Hold => {
-                let hold = match self.cfg.kind {
-                    MissionKind::Flip => self.cfg.hold_time,
-                    MissionKind::Hover => self.cfg.hover_time,
-                    MissionKind::Step => self.cfg.settle_time,
-                };
-                if elapsed >= hold {
-                    match self.cfg.kind {
-                        MissionKind::Flip => self.start_return(t, here.p),
-                        MissionKind::Hover => {
-                            self.enter(t, Phase::Land);
-                            let plan = self.landing(t, here.p);
-                            self.replan(plan);
-                        }
-                        MissionKind::Step => {
-                            self.enter(t, Phase::Step);
-                            let target = here.p + self.cfg.step;
-                            self.replan(vec![PlanSeg {
-                                phase: Phase::Step,
-                                t0: t,
-                                seg: Segment::Hold(target),
-                            }]);
-                        }
-                    }
-                }
-            }
+            Phase::Hold => self.after_hold(t, elapsed, here.p),
             Phase::Step => {
                 if elapsed >= 4.0 {
-                    self.enter(t, Phase::Land);
-                    let plan = self.landing(t, here.p);
-                    self.replan(plan);
+                    self.start_landing(t, here.p);
                 }
             }
-            Phase::ReturnHome => {
-                if here.phase == Phase::Land {
-                    self.enter(t, Phase::Land);
-                } else if self.failsafe.is_none() {
-                    let home_hi =
-                        Vector3::new(self.cfg.home.x, self.cfg.home.y, self.cfg.takeoff_point.z);
-                    if self.settled(inp, &home_hi, elapsed, self.cfg.return_time) {
-                        self.enter(t, Phase::Land);
-                        let plan = self.landing(t, home_hi);
-                        self.replan(plan);
-                    }
-                }
-            }
+            Phase::ReturnHome => self.after_return(inp, elapsed, here.phase),
             Phase::Land => {
                 if inp.on_ground && self.airborne {
                     self.enter(t, Phase::Landed);
                     let p = Vector3::new(inp.p.x, inp.p.y, self.cfg.home.z);
-                    self.replan(vec![PlanSeg {
-                        phase: Phase::Landed,
-                        t0: t,
-                        seg: Segment::Hold(p),
-                    }]);
+                    self.hold_at(t, Phase::Landed, p);
                 }
             }
             Phase::Landed => {}
         }
         self.phase
+    }
+
+    /// Whether the failsafe engages at `t`: the pose lost for longer than the timeout while
+    /// flying, outside the landing, and not engaged before.
+    fn pose_failsafe_due(&self, t: f64) -> bool {
+        self.failsafe.is_none()
+            && self.airborne
+            && !matches!(self.phase, Phase::Land | Phase::Landed)
+            && self
+                .pose_lost_since
+                .is_some_and(|t0| t - t0 >= self.cfg.pose_timeout)
+    }
+
+    /// The failsafe's return: climb from where the vehicle is, fly home at that height,
+    /// land.
+    fn start_failsafe_return(&mut self, inp: &MissionInput) {
+        let t = inp.t;
+        self.failsafe = Some(t);
+        self.enter(t, Phase::ReturnHome);
+        let alt = inp.p.z.max(self.cfg.takeoff_point.z) + self.cfg.failsafe_climb;
+        let climb = Vector3::new(inp.p.x, inp.p.y, alt);
+        let home_hi = Vector3::new(self.cfg.home.x, self.cfg.home.y, alt);
+        let dist = (home_hi - climb).norm();
+        let ret = self.cfg.return_time.max(dist / 1.5);
+        let t1 = t + self.cfg.failsafe_climb_time;
+        let t2 = t1 + ret;
+        let mut plan = vec![
+            PlanSeg {
+                phase: Phase::ReturnHome,
+                t0: t,
+                seg: Segment::Quintic {
+                    start: [inp.p, inp.v, Vector3::zeros()],
+                    end: [climb, Vector3::zeros(), Vector3::zeros()],
+                    duration: self.cfg.failsafe_climb_time,
+                },
+            },
+            PlanSeg {
+                phase: Phase::ReturnHome,
+                t0: t1,
+                seg: Self::quintic_rest(climb, home_hi, ret),
+            },
+        ];
+        plan.extend(self.landing(t2 + self.cfg.settle_time, home_hi));
+        self.replan(plan);
+    }
+
+    /// Settled at the take-off point: to the rally point (flip), or hold there.
+    fn after_takeoff(&mut self, inp: &MissionInput, elapsed: f64) {
+        let t = inp.t;
+        let target = self.cfg.takeoff_point;
+        if !self.settled(inp, &target, elapsed, self.cfg.takeoff_time) {
+            return;
+        }
+        match self.cfg.kind {
+            MissionKind::Flip => {
+                self.enter(t, Phase::Rally);
+                let rp = self.cfg.rally_point;
+                let seg = Self::quintic_rest(target, rp, self.cfg.rally_time);
+                self.replan(vec![PlanSeg {
+                    phase: Phase::Rally,
+                    t0: t,
+                    seg,
+                }]);
+            }
+            MissionKind::Hover | MissionKind::Step => {
+                self.enter(t, Phase::Hold);
+                self.hold_at(t, Phase::Hold, target);
+            }
+        }
+    }
+
+    /// At the end of the hold (at `p`): return home (flip), land (hover), or step.
+    fn after_hold(&mut self, t: f64, elapsed: f64, p: Vector3<f64>) {
+        let hold = match self.cfg.kind {
+            MissionKind::Flip => self.cfg.hold_time,
+            MissionKind::Hover => self.cfg.hover_time,
+            MissionKind::Step => self.cfg.settle_time,
+        };
+        if elapsed < hold {
+            return;
+        }
+        match self.cfg.kind {
+            MissionKind::Flip => self.start_return(t, p),
+            MissionKind::Hover => self.start_landing(t, p),
+            MissionKind::Step => {
+                self.enter(t, Phase::Step);
+                self.hold_at(t, Phase::Step, p + self.cfg.step);
+            }
+        }
+    }
+
+    /// In the return: land when the plan says so (the failsafe's), or once settled above
+    /// home (the mission's).
+    fn after_return(&mut self, inp: &MissionInput, elapsed: f64, planned: Phase) {
+        let t = inp.t;
+        if planned == Phase::Land {
+            self.enter(t, Phase::Land);
+        } else if self.failsafe.is_none() {
+            let home_hi = Vector3::new(self.cfg.home.x, self.cfg.home.y, self.cfg.takeoff_point.z);
+            if self.settled(inp, &home_hi, elapsed, self.cfg.return_time) {
+                self.start_landing(t, home_hi);
+            }
+        }
+    }
+
+    /// Enters the landing at `t` from `from`.
+    fn start_landing(&mut self, t: f64, from: Vector3<f64>) {
+        self.enter(t, Phase::Land);
+        let plan = self.landing(t, from);
+        self.replan(plan);
+    }
+
+    /// Plans a hold at `p` from `t`, labelled `phase`.
+    fn hold_at(&mut self, t: f64, phase: Phase, p: Vector3<f64>) {
+        self.replan(vec![PlanSeg {
+            phase,
+            t0: t,
+            seg: Segment::Hold(p),
+        }]);
     }
 
     fn start_return(&mut self, t: f64, from: Vector3<f64>) {

@@ -21,13 +21,13 @@ use firmware_shim::frames::quat_from_mavlink;
 use firmware_shim::link::{Failsafe, Phase};
 use firmware_shim::messages;
 use firmware_shim::pilot::{self, FlightReport, Pilot, PilotConfig};
-use firmware_shim::relay::{Direction, Relay, RelayConfig, RelayHooks, RelayStats};
 use firmware_shim::signing::SigningKey;
 use firmware_shim::transport::{Link, LinkOptions, LinkStats};
-use firmware_shim::vehicle::{SimVehicle, VehicleConfig, serve};
+use mav_relay::{Direction, Relay, RelayConfig, RelayHooks, RelayStats};
 use mavlink::dialects::common::{MavCmd, MavMessage};
-use mpc_sim::mission::{MissionConfig, MissionKind};
-use mpc_sim::report::MIN_FLIGHT_ALTITUDE_M;
+use mpc_mission::mission::{MissionConfig, MissionKind};
+use mpc_mission::report::MIN_FLIGHT_ALTITUDE_M;
+use px4_sim::vehicle::{SimVehicle, VehicleConfig, serve};
 
 mod support;
 

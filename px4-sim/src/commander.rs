@@ -33,12 +33,11 @@
 //!   (PX4 itself knows many more streams, e.g. ATTITUDE or HIGHRES_IMU, which this
 //!   simulation does not produce). A single ACK, as PX4 sends for this command.
 
+use firmware_shim::messages::Px4Mode;
 use mavlink::MessageData;
 use mavlink::dialects::common::{
     self as mc, MavAutopilot, MavCmd, MavMessage, MavModeFlag, MavResult, MavState, MavType,
 };
-
-use crate::messages::Px4Mode;
 
 /// Timing of the simulated PX4.
 #[derive(Clone, Copy, Debug, PartialEq)]
