@@ -903,6 +903,7 @@ impl<'s, 'g> Parser<'s, 'g> {
                 d
             })?;
             span = span.start..bspan.end;
+            finite(&a, &span)?;
         }
     }
 
@@ -926,6 +927,7 @@ impl<'s, 'g> Parser<'s, 'g> {
             };
             a = r.map_err(|m| semantic(ospan, m))?;
             span = span.start..bspan.end;
+            finite(&a, &span)?;
         }
     }
 
@@ -946,7 +948,9 @@ impl<'s, 'g> Parser<'s, 'g> {
             let (v, vspan) = r?;
             let zero = Val::S(self.g.zero());
             let neg = zip("-", &zero, &v, |x, y| x - y).map_err(|m| semantic(s.clone(), m))?;
-            return Ok((neg, s.start..vspan.end));
+            let span = s.start..vspan.end;
+            finite(&neg, &span)?;
+            return Ok((neg, span));
         }
         self.power()
     }
@@ -978,7 +982,9 @@ impl<'s, 'g> Parser<'s, 'g> {
                 ));
             }
             let v = zip("^", &a, &b, |x, y| x.pow(y)).map_err(|m| semantic(ospan, m))?;
-            return Ok((v, span.start..bspan.end));
+            let span = span.start..bspan.end;
+            finite(&v, &span)?;
+            return Ok((v, span));
         }
         Ok((a, span))
     }
@@ -1072,7 +1078,9 @@ impl<'s, 'g> Parser<'s, 'g> {
                         d.label = format!("in this call of `{name}`");
                         d
                     })?;
-                    return Ok((v, span.start..end.end));
+                    let span = span.start..end.end;
+                    finite(&v, &span)?;
+                    return Ok((v, span));
                 }
                 match name {
                     "pi" => {
@@ -1218,6 +1226,40 @@ impl<'s, 'g> Parser<'s, 'g> {
             }
         }
     }
+}
+
+/// Refuses a value with an entry that is a non-finite constant expression (`0/0`, `1/0`,
+/// `sqrt(-1)`, `log(0)`, overflow, `inf - inf`): the graph keeps such operations unfolded
+/// (and NaN constants as they are), so each is caught at the innermost operation that made
+/// it, which `span` covers. An infinite constant alone (`inf`, `-inf`, `2 * inf`) is a bound
+/// and passes; validation refuses it inside a function.
+fn finite(v: &Val<'_>, span: &Span) -> PResult<()> {
+    let entries = match v {
+        Val::S(e) => vec![*e],
+        Val::V(x) => x.to_vec(),
+        Val::M(m) => m.as_row_major().to_vec(),
+    };
+    let bad = entries
+        .iter()
+        .find(|e| e.is_non_finite_constant() && !e.as_constant().is_some_and(f64::is_infinite));
+    let Some(value) = bad.and_then(Expr::constant_value) else {
+        return Ok(());
+    };
+    let cause = if value.is_nan() {
+        "0/0, 0 * inf, inf - inf, or sqrt, log, asin, acos or a fractional power of a number \
+         outside their domain"
+    } else {
+        "a division by zero, log(0), a negative power of 0, or an overflow"
+    };
+    let mut d = semantic(
+        span.clone(),
+        format!(
+            "this constant expression is not finite (it evaluates to {value}): {cause}; \
+             fix the numbers so that it has a finite value"
+        ),
+    );
+    d.label = format!("evaluates to {value}");
+    Err(d)
 }
 
 fn is_reserved(name: &str) -> bool {
