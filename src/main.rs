@@ -418,11 +418,12 @@ fn build(a: &BuildArgs) -> ExitCode {
         );
         return ExitCode::FAILURE;
     }
-    match generated.write(&a.out) {
-        Ok(()) => {
-            for (p, c) in &generated.files {
+    match generated.write_files(&a.out) {
+        Ok(outcome) => {
+            for ((p, written), (_, c)) in outcome.iter().zip(&generated.files) {
                 println!(
-                    "wrote {} ({} lines)",
+                    "{} {} ({} lines)",
+                    if *written { "wrote" } else { "unchanged" },
                     a.out.join(p).display(),
                     c.lines().count()
                 );

@@ -71,9 +71,21 @@ impl GeneratedCrate {
     /// # Errors
     /// [`CodegenError::Io`] naming the path.
     pub fn write(&self, dir: &Path) -> Result<(), CodegenError> {
+        self.write_files(dir).map(drop)
+    }
+
+    /// [`write`](Self::write), saying for each file (in [`files`](Self::files) order)
+    /// whether it was written (`true`) or left as it was because its contents were equal
+    /// (`false`).
+    ///
+    /// # Errors
+    /// [`CodegenError::Io`] naming the path.
+    pub fn write_files(&self, dir: &Path) -> Result<Vec<(PathBuf, bool)>, CodegenError> {
+        let mut outcome = Vec::with_capacity(self.files.len());
         for (rel, contents) in &self.files {
             let path = dir.join(rel);
             if std::fs::read_to_string(&path).is_ok_and(|old| old == *contents) {
+                outcome.push((rel.clone(), false));
                 continue;
             }
             if let Some(parent) = path.parent() {
@@ -82,8 +94,9 @@ impl GeneratedCrate {
             let tmp = path.with_extension("mpcc-tmp");
             std::fs::write(&tmp, contents).map_err(io(&tmp))?;
             std::fs::rename(&tmp, &path).map_err(io(&path))?;
+            outcome.push((rel.clone(), true));
         }
-        Ok(())
+        Ok(outcome)
     }
 
     /// The files under `dir` that are missing or differ from the generated ones (empty:
