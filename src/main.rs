@@ -458,6 +458,21 @@ fn check(file: &std::path::Path, variant: Option<String>) -> ExitCode {
     for w in &parsed.warnings {
         eprint!("{}", w.render(&shown, &src));
     }
+    // What `mpcc build` would refuse: names the generated crate cannot use, functions that
+    // are not finite at the guess.
+    match mpc_codegen::checks::check(&parsed.ocp, &mpc_codegen::Options::new()) {
+        Ok(_) => {}
+        Err(mpc_codegen::CodegenError::Check(c)) => {
+            let diags = c.diagnostics(&parsed.source);
+            eprint!("{}", diags.render(&shown, &src));
+            eprintln!("{shown}: {} error(s)", diags.errors().count());
+            return ExitCode::FAILURE;
+        }
+        Err(e) => {
+            eprintln!("error: {shown}: {e}");
+            return ExitCode::FAILURE;
+        }
+    }
     match report(&g, &parsed.ocp) {
         Ok(text) => {
             print!("{text}");

@@ -8,7 +8,7 @@ use crate::ocp::{Decl, Integrator, OcpBuilder, OcpError, ParamKind, Slack, Stage
 
 use super::lexer::{Span, Tok, lex};
 use super::value::{MAX_DIM, Val, call, mul, zip};
-use super::{Diagnostic, DiagnosticKind, Diagnostics, ParseOptions, Parsed};
+use super::{Diagnostic, DiagnosticKind, Diagnostics, ParseOptions, Parsed, Place, SourceMap};
 
 /// Deepest expression nesting accepted (keeps hostile input from overflowing the stack).
 const MAX_DEPTH: usize = 128;
@@ -39,6 +39,8 @@ struct Parser<'s, 'g> {
     names: HashMap<String, (Binding<'g>, Span)>,
     /// Where validation items come from: item name -> span.
     spans: HashMap<String, Span>,
+    /// Where the problem's items are written, for checks after parsing.
+    source: SourceMap,
     diags: Vec<Diagnostic>,
     depth: usize,
     options: &'s ParseOptions,
@@ -78,6 +80,7 @@ pub(super) fn parse<'g>(
         b: OcpBuilder::new(g, "model"),
         names: HashMap::new(),
         spans: HashMap::new(),
+        source: SourceMap::default(),
         diags: bad
             .into_iter()
             .map(|s| {
@@ -279,6 +282,7 @@ impl<'s, 'g> Parser<'s, 'g> {
                 if self.model.is_some() {
                     return Err(name_err(nspan, "the model name is given twice"));
                 }
+                self.source.insert(Place::Model, nspan.clone());
                 self.model = Some((name, nspan));
                 Ok(())
             }
@@ -418,6 +422,8 @@ impl<'s, 'g> Parser<'s, 'g> {
         };
         let decl_span = start.start..self.prev_end();
         self.spans.insert(name.clone(), nspan.clone());
+        self.source
+            .insert(Place::Declaration(name.clone()), nspan.clone());
         let what = if role == Role::Param {
             "default value of"
         } else {
@@ -519,6 +525,7 @@ impl<'s, 'g> Parser<'s, 'g> {
         let head = start.start..self.prev_end();
         let eq_kw = if discrete { "next" } else { "der" };
         let mut eqs: HashMap<String, (Vec<Expr<'g>>, Span)> = HashMap::new();
+        let mut eq_spans = Vec::new();
         let errors_before = self.diags.len();
         self.block(|p| {
             p.expect_kw(eq_kw)?;
@@ -544,9 +551,13 @@ impl<'s, 'g> Parser<'s, 'g> {
             if eqs.contains_key(&name) {
                 return Err(name_err(nspan, format!("{eq_kw}({name}) is given twice")));
             }
+            eq_spans.push((Place::Equation(name.clone()), vspan));
             eqs.insert(name, (entries, nspan));
             Ok(())
         })?;
+        for (place, span) in eq_spans {
+            self.source.insert(place, span);
+        }
         if self.dynamics.is_some() {
             return Err(name_err(head, "the dynamics are given twice"));
         }
@@ -612,10 +623,13 @@ impl<'s, 'g> Parser<'s, 'g> {
         match kw.as_str() {
             "Q" | "R" | "P" => {
                 self.expect(&Tok::Eq, "`=`")?;
-                let (w, _) = self.weight()?;
+                let (w, wspan) = self.weight()?;
+                self.source.insert(Place::Weight(kw.clone()), wspan);
                 let n = if kw == "R" { self.nu } else { self.nx };
                 let reference = if self.eat_kw("ref") {
                     let (r, rspan) = self.vector_expr()?;
+                    self.source
+                        .insert(Place::Reference(kw.clone()), rspan.clone());
                     self.spans.insert(format!("reference of {kw}"), rspan);
                     r
                 } else {
@@ -642,10 +656,13 @@ impl<'s, 'g> Parser<'s, 'g> {
                 };
                 let (name, nspan) = self.ident("the residual's name")?;
                 self.expect(&Tok::Eq, "`=`")?;
-                let (r, _) = self.vector_expr()?;
+                let (r, rspan) = self.vector_expr()?;
                 self.expect_kw("weight")?;
                 let (w, wspan) = self.weight()?;
                 self.expect(&Tok::Semi, "`;`")?;
+                self.source.insert(Place::Residual(name.clone()), rspan);
+                self.source
+                    .insert(Place::ResidualWeight(name.clone()), wspan.clone());
                 self.spans.insert(format!("residual `{name}`"), nspan);
                 self.spans
                     .insert(format!("weight of residual `{name}`"), wspan);
@@ -658,6 +675,10 @@ impl<'s, 'g> Parser<'s, 'g> {
                 self.expect_kw("prev")?;
                 let (prev, pspan) = self.vector_expr()?;
                 self.expect(&Tok::Semi, "`;`")?;
+                self.source
+                    .insert(Place::Weight("rate".into()), wspan.clone());
+                self.source
+                    .insert(Place::Reference("rate".into()), pspan.clone());
                 self.spans.insert("input-rate weight".into(), wspan);
                 self.spans
                     .insert("previous control of the input-rate cost".into(), pspan);
@@ -787,6 +808,8 @@ impl<'s, 'g> Parser<'s, 'g> {
             }
         }
         let item = format!("constraint `{name}`");
+        self.source
+            .insert(Place::Constraint(name.clone()), hspan.clone());
         self.spans.insert(item.clone(), nspan.clone());
         for i in 0..n {
             self.spans
@@ -1197,7 +1220,11 @@ impl<'s, 'g> Parser<'s, 'g> {
                         d
                     })
                     .collect();
-                Ok(Parsed { ocp, warnings })
+                Ok(Parsed {
+                    ocp,
+                    warnings,
+                    source: self.source,
+                })
             }
             Err(e) => {
                 let mut items: Vec<Diagnostic> = e
