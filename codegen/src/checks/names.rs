@@ -259,7 +259,8 @@ pub fn check(ocp: &Ocp<'_>, opts: &Options) -> Vec<Problem> {
 /// crate name.
 fn crate_name(ocp: &Ocp<'_>, opts: &Options) -> Option<Problem> {
     let name = opts.crate_name(&ocp.name);
-    let reason = if RUST_KEYWORDS.contains(&name.as_str()) {
+    // A `--name` that is no identifier (or a keyword) is the generator's option error.
+    let reason = if opts.crate_name.is_none() && RUST_KEYWORDS.contains(&name.as_str()) {
         "is a Rust keyword"
     } else if RESERVED_CRATE_NAMES.contains(&name.as_str()) {
         "is the name of a crate the generated one depends on (or of the standard library)"
