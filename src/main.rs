@@ -418,11 +418,12 @@ fn build(a: &BuildArgs) -> ExitCode {
         );
         return ExitCode::FAILURE;
     }
-    match generated.write(&a.out) {
-        Ok(()) => {
-            for (p, c) in &generated.files {
+    match generated.write_files(&a.out) {
+        Ok(outcome) => {
+            for ((p, written), (_, c)) in outcome.iter().zip(&generated.files) {
                 println!(
-                    "wrote {} ({} lines)",
+                    "{} {} ({} lines)",
+                    if *written { "wrote" } else { "unchanged" },
                     a.out.join(p).display(),
                     c.lines().count()
                 );
@@ -456,6 +457,21 @@ fn check(file: &std::path::Path, variant: Option<String>) -> ExitCode {
     };
     for w in &parsed.warnings {
         eprint!("{}", w.render(&shown, &src));
+    }
+    // What `mpcc build` would refuse: names the generated crate cannot use, functions that
+    // are not finite at the guess.
+    match mpc_codegen::checks::check(&parsed.ocp, &mpc_codegen::Options::new()) {
+        Ok(_) => {}
+        Err(mpc_codegen::CodegenError::Check(c)) => {
+            let diags = c.diagnostics(&parsed.source);
+            eprint!("{}", diags.render(&shown, &src));
+            eprintln!("{shown}: {} error(s)", diags.errors().count());
+            return ExitCode::FAILURE;
+        }
+        Err(e) => {
+            eprintln!("error: {shown}: {e}");
+            return ExitCode::FAILURE;
+        }
     }
     match report(&g, &parsed.ocp) {
         Ok(text) => {

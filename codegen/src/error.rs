@@ -55,4 +55,8 @@ pub enum CodegenError {
     /// The `.mpc` file has errors (rendered with file, line, column and caret).
     #[error("{0}")]
     Parse(String),
+    /// The model would not compile or evaluate (clashing names, functions not finite at the
+    /// guess): see [`checks`](crate::checks).
+    #[error(transparent)]
+    Check(#[from] crate::checks::CheckErrors),
 }

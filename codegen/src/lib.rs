@@ -19,6 +19,7 @@
 //! For `build.rs`, use [`Builder`].
 
 mod builder;
+pub mod checks;
 mod emit;
 mod error;
 pub mod lower;
@@ -71,9 +72,21 @@ impl GeneratedCrate {
     /// # Errors
     /// [`CodegenError::Io`] naming the path.
     pub fn write(&self, dir: &Path) -> Result<(), CodegenError> {
+        self.write_files(dir).map(drop)
+    }
+
+    /// [`write`](Self::write), saying for each file (in [`files`](Self::files) order)
+    /// whether it was written (`true`) or left as it was because its contents were equal
+    /// (`false`).
+    ///
+    /// # Errors
+    /// [`CodegenError::Io`] naming the path.
+    pub fn write_files(&self, dir: &Path) -> Result<Vec<(PathBuf, bool)>, CodegenError> {
+        let mut outcome = Vec::with_capacity(self.files.len());
         for (rel, contents) in &self.files {
             let path = dir.join(rel);
             if std::fs::read_to_string(&path).is_ok_and(|old| old == *contents) {
+                outcome.push((rel.clone(), false));
                 continue;
             }
             if let Some(parent) = path.parent() {
@@ -82,8 +95,9 @@ impl GeneratedCrate {
             let tmp = path.with_extension("mpcc-tmp");
             std::fs::write(&tmp, contents).map_err(io(&tmp))?;
             std::fs::rename(&tmp, &path).map_err(io(&path))?;
+            outcome.push((rel.clone(), true));
         }
-        Ok(())
+        Ok(outcome)
     }
 
     /// The files under `dir` that are missing or differ from the generated ones (empty:
@@ -144,10 +158,11 @@ fn solver_items(l: &Lowered, opts: &Options) -> proc_macro2::TokenStream {
 /// `include/<name>.h`.
 ///
 /// # Errors
-/// Those of [`lower`](fn@lower), and [`CodegenError::Option`] for a crate name that is not a valid
-/// identifier.
+/// Those of [`lower`](fn@lower), [`CodegenError::Check`] for a model that would not compile
+/// or evaluate ([`checks`]), and [`CodegenError::Option`] for a crate name that is not a
+/// valid identifier.
 pub fn generate(ocp: &Ocp<'_>, opts: &Options) -> Result<GeneratedCrate, CodegenError> {
-    let l = lower_with(ocp, opts.exact_hessian)?;
+    let l = checks::check(ocp, opts)?;
     let name = opts.crate_name(&l.name);
     check_ident(&name)?;
     let items = solver_items(&l, opts);
@@ -204,7 +219,7 @@ pub fn generate_module(
     opts: &Options,
 ) -> Result<String, CodegenError> {
     check_ident(module)?;
-    let l = lower_with(ocp, opts.exact_hessian)?;
+    let l = checks::check(ocp, opts)?;
     let items = solver_items(&l, opts);
     let allows = allows();
     let m = quote::format_ident!("{}", module);
@@ -311,7 +326,8 @@ fn header(l: &Lowered, name: &str, stamp: &str, opts: &Options) -> Result<String
 /// # Errors
 /// [`CodegenError::Io`] if it cannot be read, [`CodegenError::Parse`] with the rendered
 /// diagnostics (file, line, column, caret) if it does not parse or validate, and whatever
-/// `f` returns.
+/// `f` returns, with a [`CodegenError::Check`] rendered as a located
+/// [`CodegenError::Parse`].
 pub fn with_model_file<R>(
     path: &Path,
     variant: Option<&str>,
@@ -328,7 +344,12 @@ pub fn with_model_file<R>(
         },
     )
     .map_err(|d| CodegenError::Parse(d.render(&shown, &src)))?;
-    f(&parsed.ocp)
+    f(&parsed.ocp).map_err(|e| match e {
+        CodegenError::Check(c) => {
+            CodegenError::Parse(c.diagnostics(&parsed.source).render(&shown, &src))
+        }
+        other => other,
+    })
 }
 
 /// [`generate`] for a `.mpc` file.

@@ -58,6 +58,9 @@ pub(crate) struct Inner {
     hasher: DefaultHashBuilder,
     pub(crate) symbol_names: Vec<Rc<str>>,
     symbol_lookup: HashMap<Rc<str>, NodeId>,
+    /// Per node: whether it depends on no symbol (a constant, or an operation on constants
+    /// that was not folded because its value is not finite).
+    symbol_free: Vec<bool>,
 }
 
 impl Inner {
@@ -69,6 +72,14 @@ impl Inner {
         }
         let id =
             NodeId::try_from(self.nodes.len()).expect("expression graph is limited to 2^32 nodes");
+        let free = |c: NodeId| self.symbol_free[c as usize];
+        let symbol_free = match node {
+            Node::Const(_) => true,
+            Node::Symbol(_) => false,
+            Node::Unary(_, a) | Node::PowI(a, _) => free(a),
+            Node::Binary(_, a, b) => free(a) && free(b),
+        };
+        self.symbol_free.push(symbol_free);
         self.nodes.push(node);
         let (nodes, hasher) = (&self.nodes, &self.hasher);
         self.table
@@ -162,6 +173,7 @@ impl Graph {
     pub fn heap_bytes(&self) -> usize {
         let inner = self.inner.borrow();
         inner.nodes.capacity() * size_of::<Node>()
+            + inner.symbol_free.capacity()
             + hash_buckets(inner.table.capacity()) * (size_of::<NodeId>() + 1)
             + inner
                 .symbol_names
@@ -236,6 +248,12 @@ impl Graph {
         self.const_of(id) == Some(value)
     }
 
+    /// Whether node `id` is an operation on constants only that was kept because its value
+    /// is not finite (`1/0`, `log(0)`): no rule may drop it (`0 * (1/0)` is NaN, not 0).
+    fn is_non_finite_operation(&self, id: NodeId) -> bool {
+        self.inner.borrow().symbol_free[id as usize] && self.const_of(id).is_none()
+    }
+
     fn push(&self, node: Node) -> Expr<'_> {
         let id = self.inner.borrow_mut().intern(node);
         self.wrap(id)
@@ -285,7 +303,13 @@ impl Graph {
     }
 
     /// Builds `op(a, b)`, folding constants and applying these rules (each exact in real
-    /// arithmetic; `0 * x = 0` and `x - x = 0` assume `x` finite, as every solver input is):
+    /// arithmetic; `0 * x = 0` and `x - x = 0` assume `x` finite, as every solver input is:
+    /// the generated solver refuses non-finite states, controls and parameters, and
+    /// `mpcc check` evaluates every function at the guess; `0 / x = 0` assumes `x != 0`
+    /// besides). An operand that is an operation on constants only with a non-finite value
+    /// (`1/0`, `sqrt(-1)`, kept unfolded) is never dropped by a rule, and `0 / 0` is not
+    /// `0`: IEEE arithmetic gives NaN there, and so does the graph
+    /// ([`Expr::is_non_finite_constant`] finds such nodes):
     ///
     /// - `x + 0 = 0 + x = x`, `x + (-y) = x - y`, `(-x) + y = y - x`;
     /// - `x - 0 = x`, `0 - x = -x`, `x - x = 0`, `x - (-y) = x + y`;
@@ -335,7 +359,7 @@ impl Graph {
                 if ca == Some(0.0) {
                     return self.unary(UnaryOp::Neg, self.wrap(b));
                 }
-                if a == b {
+                if a == b && !self.is_non_finite_operation(a) {
                     return self.zero();
                 }
                 if let Some(y) = neg_of(nb) {
@@ -343,7 +367,7 @@ impl Graph {
                 }
             }
             BinaryOp::Mul => {
-                if ca == Some(0.0) {
+                if ca == Some(0.0) && !self.is_non_finite_operation(b) {
                     return self.zero();
                 }
                 if ca == Some(1.0) {
@@ -357,7 +381,7 @@ impl Graph {
                 }
             }
             BinaryOp::Div => {
-                if ca == Some(0.0) {
+                if ca == Some(0.0) && cb.is_none() && !self.is_non_finite_operation(b) {
                     return self.zero();
                 }
                 if cb == Some(1.0) {
@@ -436,6 +460,35 @@ impl<'g> Expr<'g> {
     /// Whether this is a symbol.
     pub fn is_symbol(&self) -> bool {
         matches!(self.graph.node(self.id), Node::Symbol(_))
+    }
+
+    /// Whether this is a constant expression whose value is not finite: a NaN or infinite
+    /// constant, or an operation on constants only that was not folded because its value
+    /// is not finite (`1/0`, `0/0`, `sqrt(-1)`, `log(0)`, `1e308 * 10`).
+    pub fn is_non_finite_constant(&self) -> bool {
+        match self.as_constant() {
+            Some(v) => !v.is_finite(),
+            None => self.graph.is_non_finite_operation(self.id),
+        }
+    }
+
+    /// The IEEE value of an expression without symbols (`None` if it depends on one). This
+    /// is how a non-finite constant expression (see
+    /// [`is_non_finite_constant`](Self::is_non_finite_constant)) is shown to the user.
+    pub fn constant_value(&self) -> Option<f64> {
+        if let Some(v) = self.as_constant() {
+            return Some(v);
+        }
+        if !self.graph.inner.borrow().symbol_free[self.id as usize] {
+            return None;
+        }
+        match self.kind() {
+            ExprKind::Constant(v) => Some(v),
+            ExprKind::Symbol(_) => None,
+            ExprKind::Unary(op, a) => Some(op.apply(a.constant_value()?)),
+            ExprKind::PowI(a, n) => Some(powi(a.constant_value()?, n)),
+            ExprKind::Binary(op, a, b) => Some(op.apply(a.constant_value()?, b.constant_value()?)),
+        }
     }
 
     /// Whether this is the constant 0.
@@ -704,6 +757,40 @@ mod tests {
         let log0 = g.zero().ln();
         assert!(log0.as_constant().is_none());
         assert!((1.0 / g.zero()).as_constant().is_none());
+    }
+
+    #[test]
+    fn non_finite_constant_expressions_are_never_folded_to_finite_values() {
+        let g = Graph::new();
+        let (zero, one, x) = (g.zero(), g.one(), g.symbol("x"));
+        let inf = one / zero;
+        let cases = [
+            ("0/0", zero / zero),
+            ("0*(1/0)", zero * inf),
+            ("(1/0)*0", inf * zero),
+            ("1/0", inf),
+            ("sqrt(-1)", (-one).sqrt()),
+            ("log(0)", zero.ln()),
+            ("log(-1)", (-one).ln()),
+            ("(-8)^(1/3)", g.constant_unchecked(-8.0).pow(1.0 / 3.0)),
+            ("0^-1", zero.powi(-1)),
+            ("(1/0)-(1/0)", inf - inf),
+            ("0/(1/0 - 1/0)", zero / (inf - inf)),
+            ("1e308*10", g.constant_unchecked(1e308) * 10.0),
+            ("inf*0", g.constant_unchecked(f64::INFINITY) * 0.0),
+        ];
+        for (what, e) in cases {
+            assert!(e.is_non_finite_constant(), "{what} must stay non-finite");
+            let v = e.constant_value().expect("no symbol");
+            assert!(!v.is_finite(), "{what} evaluates to {v}");
+        }
+        assert_eq!((zero / zero).constant_value().map(f64::is_nan), Some(true));
+        // Finite constants and expressions of symbols are not non-finite constants.
+        assert!(!(one + 2.0).is_non_finite_constant());
+        assert!(!(x / zero).is_non_finite_constant());
+        assert_eq!((x / zero).constant_value(), None);
+        // The rules still apply to symbols (finite by the solver's contract).
+        assert!((zero * x).is_zero() && (zero / x).is_zero() && (x - x).is_zero());
     }
 
     #[test]

@@ -68,7 +68,8 @@ pub struct Diagnostic {
 }
 
 impl Diagnostic {
-    pub(crate) fn new(kind: DiagnosticKind, span: Span, message: impl Into<String>) -> Self {
+    /// A diagnostic of `kind` at `span` (an empty label: the caret says "here").
+    pub fn new(kind: DiagnosticKind, span: Span, message: impl Into<String>) -> Self {
         Diagnostic {
             kind,
             span,
@@ -182,6 +183,45 @@ pub struct ParseOptions {
     pub variant: Option<String>,
 }
 
+/// An item of the source that later checks (code generation, evaluation at the guess)
+/// point at: see [`SourceMap`].
+#[derive(Clone, Debug, PartialEq, Eq, Hash)]
+pub enum Place {
+    /// The name in `model NAME;`.
+    Model,
+    /// The name in the declaration of a state, control or parameter.
+    Declaration(String),
+    /// The right-hand side of `der(NAME) = ...` or `next(NAME) = ...`, by state name.
+    Equation(String),
+    /// The expression of a (terminal) residual, by name.
+    Residual(String),
+    /// The weight of a residual, by the residual's name.
+    ResidualWeight(String),
+    /// The expression of a general constraint, by name.
+    Constraint(String),
+    /// The weight `Q`, `R`, `P` or, for the input-rate term, `rate`.
+    Weight(String),
+    /// The reference (`ref`) of `Q`, `R`, `P`, or the `prev` of `rate`.
+    Reference(String),
+}
+
+/// Where the items of a parsed problem are written: a [`Place`] to its byte span.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SourceMap {
+    places: std::collections::HashMap<Place, Span>,
+}
+
+impl SourceMap {
+    /// The span of `place`, if the source has it.
+    pub fn span(&self, place: &Place) -> Option<Span> {
+        self.places.get(place).cloned()
+    }
+
+    pub(crate) fn insert(&mut self, place: Place, span: Span) {
+        self.places.insert(place, span);
+    }
+}
+
 /// A parsed and validated problem with its warnings.
 #[derive(Debug)]
 pub struct Parsed<'g> {
@@ -189,6 +229,8 @@ pub struct Parsed<'g> {
     pub ocp: Ocp<'g>,
     /// Warnings (validation warnings, with the place they refer to).
     pub warnings: Vec<Diagnostic>,
+    /// Where its items are written, for later checks' diagnostics.
+    pub source: SourceMap,
 }
 
 /// Parses `.mpc` source into an [`Ocp`] built in `graph`, and validates it.

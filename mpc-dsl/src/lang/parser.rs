@@ -8,7 +8,7 @@ use crate::ocp::{Decl, Integrator, OcpBuilder, OcpError, ParamKind, Slack, Stage
 
 use super::lexer::{Span, Tok, lex};
 use super::value::{MAX_DIM, Val, call, mul, zip};
-use super::{Diagnostic, DiagnosticKind, Diagnostics, ParseOptions, Parsed};
+use super::{Diagnostic, DiagnosticKind, Diagnostics, ParseOptions, Parsed, Place, SourceMap};
 
 /// Deepest expression nesting accepted (keeps hostile input from overflowing the stack).
 const MAX_DEPTH: usize = 128;
@@ -39,6 +39,8 @@ struct Parser<'s, 'g> {
     names: HashMap<String, (Binding<'g>, Span)>,
     /// Where validation items come from: item name -> span.
     spans: HashMap<String, Span>,
+    /// Where the problem's items are written, for checks after parsing.
+    source: SourceMap,
     diags: Vec<Diagnostic>,
     depth: usize,
     options: &'s ParseOptions,
@@ -78,6 +80,7 @@ pub(super) fn parse<'g>(
         b: OcpBuilder::new(g, "model"),
         names: HashMap::new(),
         spans: HashMap::new(),
+        source: SourceMap::default(),
         diags: bad
             .into_iter()
             .map(|s| {
@@ -279,6 +282,7 @@ impl<'s, 'g> Parser<'s, 'g> {
                 if self.model.is_some() {
                     return Err(name_err(nspan, "the model name is given twice"));
                 }
+                self.source.insert(Place::Model, nspan.clone());
                 self.model = Some((name, nspan));
                 Ok(())
             }
@@ -418,6 +422,8 @@ impl<'s, 'g> Parser<'s, 'g> {
         };
         let decl_span = start.start..self.prev_end();
         self.spans.insert(name.clone(), nspan.clone());
+        self.source
+            .insert(Place::Declaration(name.clone()), nspan.clone());
         let what = if role == Role::Param {
             "default value of"
         } else {
@@ -519,6 +525,7 @@ impl<'s, 'g> Parser<'s, 'g> {
         let head = start.start..self.prev_end();
         let eq_kw = if discrete { "next" } else { "der" };
         let mut eqs: HashMap<String, (Vec<Expr<'g>>, Span)> = HashMap::new();
+        let mut eq_spans = Vec::new();
         let errors_before = self.diags.len();
         self.block(|p| {
             p.expect_kw(eq_kw)?;
@@ -544,9 +551,13 @@ impl<'s, 'g> Parser<'s, 'g> {
             if eqs.contains_key(&name) {
                 return Err(name_err(nspan, format!("{eq_kw}({name}) is given twice")));
             }
+            eq_spans.push((Place::Equation(name.clone()), vspan));
             eqs.insert(name, (entries, nspan));
             Ok(())
         })?;
+        for (place, span) in eq_spans {
+            self.source.insert(place, span);
+        }
         if self.dynamics.is_some() {
             return Err(name_err(head, "the dynamics are given twice"));
         }
@@ -612,10 +623,13 @@ impl<'s, 'g> Parser<'s, 'g> {
         match kw.as_str() {
             "Q" | "R" | "P" => {
                 self.expect(&Tok::Eq, "`=`")?;
-                let (w, _) = self.weight()?;
+                let (w, wspan) = self.weight()?;
+                self.source.insert(Place::Weight(kw.clone()), wspan);
                 let n = if kw == "R" { self.nu } else { self.nx };
                 let reference = if self.eat_kw("ref") {
                     let (r, rspan) = self.vector_expr()?;
+                    self.source
+                        .insert(Place::Reference(kw.clone()), rspan.clone());
                     self.spans.insert(format!("reference of {kw}"), rspan);
                     r
                 } else {
@@ -642,10 +656,13 @@ impl<'s, 'g> Parser<'s, 'g> {
                 };
                 let (name, nspan) = self.ident("the residual's name")?;
                 self.expect(&Tok::Eq, "`=`")?;
-                let (r, _) = self.vector_expr()?;
+                let (r, rspan) = self.vector_expr()?;
                 self.expect_kw("weight")?;
                 let (w, wspan) = self.weight()?;
                 self.expect(&Tok::Semi, "`;`")?;
+                self.source.insert(Place::Residual(name.clone()), rspan);
+                self.source
+                    .insert(Place::ResidualWeight(name.clone()), wspan.clone());
                 self.spans.insert(format!("residual `{name}`"), nspan);
                 self.spans
                     .insert(format!("weight of residual `{name}`"), wspan);
@@ -658,6 +675,10 @@ impl<'s, 'g> Parser<'s, 'g> {
                 self.expect_kw("prev")?;
                 let (prev, pspan) = self.vector_expr()?;
                 self.expect(&Tok::Semi, "`;`")?;
+                self.source
+                    .insert(Place::Weight("rate".into()), wspan.clone());
+                self.source
+                    .insert(Place::Reference("rate".into()), pspan.clone());
                 self.spans.insert("input-rate weight".into(), wspan);
                 self.spans
                     .insert("previous control of the input-rate cost".into(), pspan);
@@ -787,6 +808,8 @@ impl<'s, 'g> Parser<'s, 'g> {
             }
         }
         let item = format!("constraint `{name}`");
+        self.source
+            .insert(Place::Constraint(name.clone()), hspan.clone());
         self.spans.insert(item.clone(), nspan.clone());
         for i in 0..n {
             self.spans
@@ -903,6 +926,7 @@ impl<'s, 'g> Parser<'s, 'g> {
                 d
             })?;
             span = span.start..bspan.end;
+            finite(&a, &span)?;
         }
     }
 
@@ -926,6 +950,7 @@ impl<'s, 'g> Parser<'s, 'g> {
             };
             a = r.map_err(|m| semantic(ospan, m))?;
             span = span.start..bspan.end;
+            finite(&a, &span)?;
         }
     }
 
@@ -946,7 +971,9 @@ impl<'s, 'g> Parser<'s, 'g> {
             let (v, vspan) = r?;
             let zero = Val::S(self.g.zero());
             let neg = zip("-", &zero, &v, |x, y| x - y).map_err(|m| semantic(s.clone(), m))?;
-            return Ok((neg, s.start..vspan.end));
+            let span = s.start..vspan.end;
+            finite(&neg, &span)?;
+            return Ok((neg, span));
         }
         self.power()
     }
@@ -978,7 +1005,9 @@ impl<'s, 'g> Parser<'s, 'g> {
                 ));
             }
             let v = zip("^", &a, &b, |x, y| x.pow(y)).map_err(|m| semantic(ospan, m))?;
-            return Ok((v, span.start..bspan.end));
+            let span = span.start..bspan.end;
+            finite(&v, &span)?;
+            return Ok((v, span));
         }
         Ok((a, span))
     }
@@ -1072,7 +1101,9 @@ impl<'s, 'g> Parser<'s, 'g> {
                         d.label = format!("in this call of `{name}`");
                         d
                     })?;
-                    return Ok((v, span.start..end.end));
+                    let span = span.start..end.end;
+                    finite(&v, &span)?;
+                    return Ok((v, span));
                 }
                 match name {
                     "pi" => {
@@ -1189,7 +1220,11 @@ impl<'s, 'g> Parser<'s, 'g> {
                         d
                     })
                     .collect();
-                Ok(Parsed { ocp, warnings })
+                Ok(Parsed {
+                    ocp,
+                    warnings,
+                    source: self.source,
+                })
             }
             Err(e) => {
                 let mut items: Vec<Diagnostic> = e
@@ -1218,6 +1253,40 @@ impl<'s, 'g> Parser<'s, 'g> {
             }
         }
     }
+}
+
+/// Refuses a value with an entry that is a non-finite constant expression (`0/0`, `1/0`,
+/// `sqrt(-1)`, `log(0)`, overflow, `inf - inf`): the graph keeps such operations unfolded
+/// (and NaN constants as they are), so each is caught at the innermost operation that made
+/// it, which `span` covers. An infinite constant alone (`inf`, `-inf`, `2 * inf`) is a bound
+/// and passes; validation refuses it inside a function.
+fn finite(v: &Val<'_>, span: &Span) -> PResult<()> {
+    let entries = match v {
+        Val::S(e) => vec![*e],
+        Val::V(x) => x.to_vec(),
+        Val::M(m) => m.as_row_major().to_vec(),
+    };
+    let bad = entries
+        .iter()
+        .find(|e| e.is_non_finite_constant() && !e.as_constant().is_some_and(f64::is_infinite));
+    let Some(value) = bad.and_then(Expr::constant_value) else {
+        return Ok(());
+    };
+    let cause = if value.is_nan() {
+        "0/0, 0 * inf, inf - inf, or sqrt, log, asin, acos or a fractional power of a number \
+         outside their domain"
+    } else {
+        "a division by zero, log(0), a negative power of 0, or an overflow"
+    };
+    let mut d = semantic(
+        span.clone(),
+        format!(
+            "this constant expression is not finite (it evaluates to {value}): {cause}; \
+             fix the numbers so that it has a finite value"
+        ),
+    );
+    d.label = format!("evaluates to {value}");
+    Err(d)
 }
 
 fn is_reserved(name: &str) -> bool {

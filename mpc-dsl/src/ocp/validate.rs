@@ -227,6 +227,14 @@ impl<'g> Checker<'_, 'g> {
                     value: *v,
                 });
             }
+            ExprKind::Unary(..) | ExprKind::PowI(..) | ExprKind::Binary(..)
+                if e.is_non_finite_constant() =>
+            {
+                found.push(OcpError::NonFinite {
+                    item: item.to_owned(),
+                    value: e.constant_value().unwrap_or(f64::NAN),
+                });
+            }
             ExprKind::Symbol(name) => match self.roles.get(&e.index()) {
                 None => found.push(OcpError::UnknownSymbol {
                     item: item.to_owned(),
