@@ -61,9 +61,6 @@ impl<'a> CAbi<'a> {
                 if !(mem as usize).is_multiple_of(core::mem::align_of::<Solver>()) {
                     return ERR_ALIGN;
                 }
-                /// Copied into the caller's memory, so that no solver-sized temporary is
-                /// built on the (possibly small) stack of the caller.
-                static UNCONFIGURED: Solver = Solver::unconfigured();
                 let s = mem.cast::<Solver>();
                 // SAFETY: `mem` is non-null, large enough and aligned (checked above) and
                 // does not overlap the static.

@@ -445,3 +445,46 @@ pub(super) fn settings_struct() -> TokenStream {
         }
     }
 }
+
+/// Construction in place: the `UNCONFIGURED` image that `create` and `Solver::init` copy
+/// into the caller's memory, `Solver::init` (on a `MaybeUninit`: a `static`, a
+/// `Box::new_uninit`) and, with the generated crate's `alloc` feature, `Solver::boxed`. The
+/// `unsafe` they need stays in this module; no solver-sized temporary is built on the stack.
+pub(super) fn in_place() -> TokenStream {
+    quote! {
+        /// Copied into the caller's memory by `create` and [`Solver::init`], so that no
+        /// solver-sized temporary is built on the (possibly small) stack of the caller.
+        static UNCONFIGURED: Solver = Solver::unconfigured();
+
+        #[cfg(feature = "alloc")]
+        extern crate alloc;
+
+        impl Solver {
+            /// Builds a configured solver in `slot` (a `static`, a `Box::new_uninit()`, any
+            /// memory of the caller) and returns it: the unconfigured image is copied into
+            /// it and configured there, so the stack holds no solver-sized temporary, which
+            /// [`new`](Solver::new) (returned by value) does, for any horizon.
+            pub fn init(slot: &mut core::mem::MaybeUninit<Solver>) -> &mut Solver {
+                // SAFETY: `slot` is valid for the write of one `Solver` and does not overlap
+                // the static; the copy initializes it completely.
+                unsafe { core::ptr::copy_nonoverlapping(&UNCONFIGURED, slot.as_mut_ptr(), 1) };
+                // SAFETY: initialized just above.
+                let s = unsafe { slot.assume_init_mut() };
+                // Cannot fail for a validated model; the solver stays unconfigured if it did.
+                let _ = s.configure();
+                s
+            }
+
+            /// A configured solver on the heap, built in place ([`init`](Solver::init) on
+            /// `Box::new_uninit`): for any horizon, on any stack. Needs the crate's `alloc`
+            /// feature.
+            #[cfg(feature = "alloc")]
+            pub fn boxed() -> alloc::boxed::Box<Solver> {
+                let mut b = alloc::boxed::Box::<Solver>::new_uninit();
+                Solver::init(&mut b);
+                // SAFETY: `init` initialized it.
+                unsafe { b.assume_init() }
+            }
+        }
+    }
+}

@@ -73,6 +73,7 @@ pub(crate) fn ffi(l: &Lowered, opts: &Options) -> TokenStream {
         c_run_time::settings_struct(),
         c_abi::conversions(),
         c_run_time::checked_io(),
+        c_run_time::in_place(),
         c.memory(),
         c.x0_and_param_setters(),
         c.named_param_setters(),
