@@ -879,8 +879,8 @@ impl<
     }
 
     /// The multipliers of the box bounds of state `k` (`1 <= k <= N`; `x_0` is fixed, not
-    /// bounded) in the last QP, as [`control_bound_multipliers`]
-    /// (Self::control_bound_multipliers): `-(Q dx + S'du + g_x + A'pi_k - pi_{k-1} +
+    /// bounded) in the last QP, as
+    /// [`control_bound_multipliers`](Self::control_bound_multipliers): `-(Q dx + S'du + g_x + A'pi_k - pi_{k-1} +
     /// C'lam_g)` (at `k = N`, the terminal Hessian and rows, no dynamics ahead).
     pub fn state_bound_multipliers(&self, k: usize) -> Option<SVector<T, NX>> {
         let sol = self.solver.solution();
