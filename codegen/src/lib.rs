@@ -265,10 +265,14 @@ fn cargo_toml(name: &str, stamp: &str, opts: &Options) -> String {
             "[features]\n# `std` links the standard library (panic handler, unwinding) into the \
              staticlib on hosted\n# targets; for bare metal use --no-default-features and \
              `panic-handler` (or your own).\ndefault = [\"std\"]\nstd = []\npanic-handler = \
-             []\n\n",
+             []\n# `alloc`: `Solver::boxed()`, a solver built on the heap in place.\nalloc = []\n\n",
         )
     } else {
-        ("", "")
+        (
+            "",
+            "[features]\n# `alloc`: `Solver::boxed()`, a solver built on the heap in place.\n\
+             alloc = []\n\n",
+        )
     };
     format!(
         "# {stamp}\n[package]\nname = \"{name}\"\nversion = \"0.1.0\"\nedition = \"2024\"\n\

@@ -1121,3 +1121,62 @@ fn control_bounds_set_at_run_time_bound_the_condensed_f32_solver() {
     let c = climb(&mut s);
     assert!((c - 12.0).abs() <= 1e-4, "bounded thrust {c}");
 }
+
+/// A parameter that feeds a weight (`q_w`, the diagonal of Q in `paper_pointmass`) is
+/// refused at set time if it makes the weight negative, by every setter that reaches it,
+/// and nothing changes; a positive one is accepted and reaches the solver's weights.
+#[test]
+fn parameters_that_make_a_weight_negative_are_refused() {
+    use paper_pointmass as m;
+    let mut s = Box::new(m::Solver::new());
+    let before: Vec<_> = (0..=m::N).map(|k| s.param(k).unwrap()).collect();
+    let w_before = *s.rti().weights().0;
+    let mut q = [1.0; 9];
+    q[4] = -0.5;
+    assert_eq!(s.set_q_w(&q), Err(m::SetError::NegativeWeight));
+    let mut p = before[0];
+    p[m::PARAM_Q_W.start + 4] = -0.5;
+    assert_eq!(s.set_param(0, &p), Err(m::SetError::NegativeWeight));
+    assert_eq!(s.set_param_all(&p), Err(m::SetError::NegativeWeight));
+    let after: Vec<_> = (0..=m::N).map(|k| s.param(k).unwrap()).collect();
+    assert_eq!(after, before);
+    assert_eq!(*s.rti().weights().0, w_before);
+    q[4] = 0.5;
+    assert_eq!(s.set_q_w(&q), Ok(()));
+    assert_eq!(s.rti().weights().0[(4, 4)], 0.5);
+}
+
+/// The generated `set_settings` validates; `set_trajectory_guess` and `trajectory` round-trip
+/// (the appended input-rate states of stage `k >= 1` take `u[k - 1]`); the soft-penalty and
+/// read-out methods exist on a model without general rows.
+#[test]
+fn generated_run_time_api_round_trips() {
+    use paper_pointmass as m;
+    let mut s = Box::new(m::Solver::new());
+    let mut bad = *s.settings();
+    bad.qp.tol_stat = -1.0;
+    assert_eq!(s.set_settings(&bad), Err(m::SetError::InvalidSetting));
+    let mut good = *s.settings();
+    good.shift = !good.shift;
+    assert_eq!(s.set_settings(&good), Ok(()));
+    assert_eq!(*s.settings(), good);
+    let x: [[f64; m::NX_MODEL]; m::N + 1] =
+        core::array::from_fn(|k| core::array::from_fn(|i| (k * 10 + i) as f64 * 0.01));
+    let u: [[f64; m::NU]; m::N] = core::array::from_fn(|k| [k as f64, 0.5, -0.5]);
+    s.set_trajectory_guess(&x, &u).unwrap();
+    let (mut xb, mut ub) = ([[0.0; m::NX_MODEL]; m::N + 1], [[0.0; m::NU]; m::N]);
+    s.trajectory(&mut xb, &mut ub);
+    assert_eq!((xb, ub), (x, u));
+    assert_eq!(s.rti().state(3).unwrap()[m::NX_MODEL], u[2][0]);
+    let mut xn = x;
+    xn[2][1] = f64::NAN;
+    assert_eq!(s.set_trajectory_guess(&xn, &u), Err(m::SetError::NonFinite));
+    s.trajectory(&mut xb, &mut ub);
+    assert_eq!(xb, x);
+    assert_eq!(s.set_soft_penalties(&[], &[]), Ok(()));
+    assert_eq!(s.soft_penalties(), ([], []));
+    s.set_x0(&[0.1; m::NX_MODEL]).unwrap();
+    assert_eq!(s.solve_sqp().status, m::RtiStatus::Ok);
+    assert!(s.kkt_residual().unwrap() <= 1e-5);
+    assert!(s.cost() > 0.0);
+}

@@ -849,6 +849,17 @@ impl<
         (self.sgn.sl, self.sgn.su)
     }
 
+    /// Lower and upper multipliers `(lam_l, lam_u)` of stage `k < N`'s general constraints
+    /// as the last interior-point solve left them (zero on absent sides).
+    pub(crate) fn row_multipliers(&self, k: usize) -> Option<(Vect<T, NG>, Vect<T, NG>)> {
+        self.rg.get(k).map(|r| (r.ll, r.lu))
+    }
+
+    /// [`row_multipliers`](Self::row_multipliers) of the terminal general constraints.
+    pub(crate) fn terminal_row_multipliers(&self) -> (Vect<T, NGN>, Vect<T, NGN>) {
+        (self.rgn.ll, self.rgn.lu)
+    }
+
     /// Sets the primal starting point used when `settings.warm_start` is on.
     pub fn set_initial_guess(&mut self, guess: &QpSolution<T, NX, NU, N>) {
         self.sol = *guess;

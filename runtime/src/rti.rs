@@ -64,6 +64,12 @@ pub struct RtiSettings<T> {
     /// them and searches monotonically (see `solve_sqp`). 0: every step searches
     /// monotonically. Default 4.
     pub sqp_watchdog: u32,
+    /// Escalation of failed real-time iterations: [`Rti::feedback`] reports
+    /// [`RtiStatus::PlanExhausted`] instead of [`RtiStatus::UsedPreviousPlan`] from the
+    /// `min(fallback_limit, N)`-th QP failure in a row on (see [`RtiStatus::PlanExhausted`]).
+    /// At least 1; the default, `u32::MAX`, escalates once the last good plan is used up
+    /// (the `N`-th failure in a row).
+    pub fallback_limit: u32,
 }
 
 impl<T: Real> RtiSettings<T> {
@@ -92,6 +98,7 @@ impl<T: Real> RtiSettings<T> {
         sqp_loose_qps: T::SQP_LOOSE_QPS,
         sqp_exact_hessian: true,
         sqp_watchdog: 4,
+        fallback_limit: u32::MAX,
     };
 
     /// Every setting zero (no QP iteration, no SQP iteration): [`Rti::unconfigured`]'s.
@@ -104,7 +111,38 @@ impl<T: Real> RtiSettings<T> {
         sqp_loose_qps: false,
         sqp_exact_hessian: false,
         sqp_watchdog: 0,
+        fallback_limit: 0,
     };
+
+    /// Checks the settings: every tolerance finite and non-negative, the QP's
+    /// regularization finite and non-negative and its `mu0` finite and positive, the QP and
+    /// SQP iteration limits and [`fallback_limit`](Self::fallback_limit) at least 1.
+    ///
+    /// # Errors
+    /// [`SetError::NonFinite`] for a NaN or infinite tolerance, `reg` or `mu0` (checked
+    /// first), [`SetError::InvalidSetting`] for any other value out of its range.
+    pub fn validate(&self) -> Result<(), SetError> {
+        let q = &self.qp;
+        let reals = [
+            q.tol_stat,
+            q.tol_eq,
+            q.tol_ineq,
+            q.tol_comp,
+            q.reg,
+            q.mu0,
+            self.sqp_tol,
+            self.sqp_kkt_tol,
+        ];
+        if !reals.iter().all(|v| v.finite()) {
+            return Err(SetError::NonFinite);
+        }
+        let non_negative = reals.iter().all(|&v| v >= T::ZERO);
+        let counts = q.max_iter > 0 && self.sqp_max_iter > 0 && self.fallback_limit > 0;
+        if !(non_negative && counts && q.mu0 > T::ZERO) {
+            return Err(SetError::InvalidSetting);
+        }
+        Ok(())
+    }
 }
 
 /// Outcome of a control step or a full SQP solve.
@@ -121,6 +159,14 @@ pub enum RtiStatus {
     NotPrepared = 3,
     /// The full SQP reached its iteration limit.
     MaxIterations = 4,
+    /// The escalation of [`UsedPreviousPlan`](Self::UsedPreviousPlan): the QP failed for the
+    /// `min(RtiSettings::fallback_limit, N)`-th time in a row (or more;
+    /// [`RtiInfo::consecutive_failures`] counts them). The control is still the fallback's,
+    /// control `min(j, N - 1)` of the last good plan at the `j`-th failure in a row: from
+    /// the `N`-th failure on, that plan's last control again and again, which nothing
+    /// re-plans. The caller should act (a safe mode, a hold, a reset of the guess); the next
+    /// solved QP returns [`Ok`](Self::Ok) and resets the count.
+    PlanExhausted = 5,
 }
 
 /// Status and statistics of the last call.
@@ -137,6 +183,10 @@ pub struct RtiInfo<T> {
     /// Newton's steps taken whole did not pay, and the rest of the solve searched
     /// monotonically.
     pub watchdog_returned: bool,
+    /// QP failures of [`Rti::feedback`] in a row up to this call (0 after a solved QP or a
+    /// converged [`Rti::solve_sqp`]); calls refused before a QP (`NonFiniteInput`,
+    /// `NotPrepared`) do not count.
+    pub consecutive_failures: u32,
 }
 
 impl<T: Real> RtiInfo<T> {
@@ -155,6 +205,7 @@ impl<T: Real> RtiInfo<T> {
         },
         sqp_iterations: 0,
         watchdog_returned: false,
+        consecutive_failures: 0,
     };
 }
 
@@ -173,6 +224,11 @@ pub enum SetError {
     NegativePenalty,
     /// More states have a bound than the solver has state-bound rows (its `NBX`).
     TooManyStateBounds,
+    /// A setting is out of its range ([`RtiSettings::validate`]).
+    InvalidSetting,
+    /// A weight's symmetric part is not positive semidefinite (a negative diagonal entry,
+    /// or a negative eigenvalue): the cost would be unbounded below.
+    NegativeWeight,
 }
 
 /// A real-time-iteration NMPC solver for model `M` with horizon `N`; `NC`, `NBX` and `NR`
@@ -236,6 +292,8 @@ pub struct Rti<
     gn_current: bool,
     plan: [SVector<T, NU>; N],
     plan_age: usize,
+    /// QP failures of `feedback` in a row ([`RtiInfo::consecutive_failures`]).
+    failures: u32,
     prepared: bool,
     /// A feedback has moved time forward since the last shift.
     pending_shift: bool,
@@ -449,6 +507,7 @@ impl<
             gn_current: false,
             plan: [crate::zeros(); N],
             plan_age: 0,
+            failures: 0,
             prepared: false,
             pending_shift: false,
             xt: [crate::zeros(); N],
@@ -465,7 +524,10 @@ impl<
     /// is kept exactly).
     ///
     /// # Errors
-    /// [`SetError::NonFinite`] if an entry is NaN or infinite.
+    /// [`SetError::NonFinite`] if an entry is NaN or infinite (checked first),
+    /// [`SetError::NegativeWeight`] if the symmetric part of `W` or `W_N` is not positive
+    /// semidefinite (a negative diagonal entry; off the diagonal, a negative pivot of its
+    /// `LDL'` factorization beyond rounding). Nothing changes on error.
     pub fn set_weights(
         &mut self,
         w: &SMatrix<T, NY, NY>,
@@ -473,6 +535,9 @@ impl<
     ) -> Result<(), SetError> {
         if !(all_finite(w) && all_finite(wn)) {
             return Err(SetError::NonFinite);
+        }
+        if !(positive_semidefinite(w) && positive_semidefinite(wn)) {
+            return Err(SetError::NegativeWeight);
         }
         // Weights equal to the current ones (a generated solver sets them again whenever a
         // stage-0 parameter changes) keep the Gauss-Newton terms.
@@ -483,6 +548,23 @@ impl<
             self.gn_current = false;
         }
         Ok(())
+    }
+
+    /// Replaces the settings after checking them ([`RtiSettings::validate`]). The public
+    /// [`settings`](Self::settings) field can be written directly too, without a check.
+    ///
+    /// # Errors
+    /// [`SetError::NonFinite`], [`SetError::InvalidSetting`]; nothing changes then.
+    pub fn set_settings(&mut self, settings: &RtiSettings<T>) -> Result<(), SetError> {
+        settings.validate()?;
+        self.settings = *settings;
+        Ok(())
+    }
+
+    /// The weights in use, `(W, W_N)`: the symmetric parts of those
+    /// [`set_weights`](Self::set_weights) last accepted.
+    pub fn weights(&self) -> (&SMatrix<T, NY, NY>, &SMatrix<T, NYN, NYN>) {
+        (&self.w, &self.wn)
     }
 
     /// Sets the residual reference of stage `k < N`.
@@ -671,6 +753,150 @@ impl<
         Ok(())
     }
 
+    /// Sets the guess of state `k <= N` (`k = N`: the terminal state), the linearization
+    /// point of the next [`prepare`](Self::prepare) there.
+    ///
+    /// # Errors
+    /// [`SetError::NonFinite`], [`SetError::StageOutOfRange`]; nothing changes then.
+    pub fn set_state_guess(&mut self, k: usize, x: &SVector<T, NX>) -> Result<(), SetError> {
+        if !all_finite(x) {
+            return Err(SetError::NonFinite);
+        }
+        if k == N {
+            self.xn = *x;
+        } else {
+            *self.x.get_mut(k).ok_or(SetError::StageOutOfRange)? = *x;
+        }
+        Ok(())
+    }
+
+    /// Sets the guess of control `k < N`, which is also control `k` of the plan that a failed
+    /// QP falls back on.
+    ///
+    /// # Errors
+    /// [`SetError::NonFinite`], [`SetError::StageOutOfRange`]; nothing changes then.
+    pub fn set_control_guess(&mut self, k: usize, u: &SVector<T, NU>) -> Result<(), SetError> {
+        if !all_finite(u) {
+            return Err(SetError::NonFinite);
+        }
+        let (Some(uk), Some(pk)) = (self.u.get_mut(k), self.plan.get_mut(k)) else {
+            return Err(SetError::StageOutOfRange);
+        };
+        *uk = *u;
+        *pk = *u;
+        Ok(())
+    }
+
+    /// Sets the whole trajectory guess stage by stage: `x[k]` for `k < N`, `xn` for `x_N`,
+    /// `u[k]` for `k < N` (the controls also become the fallback plan).
+    ///
+    /// # Errors
+    /// [`SetError::NonFinite`]; nothing changes then.
+    pub fn set_trajectory_guess(
+        &mut self,
+        x: &[SVector<T, NX>; N],
+        xn: &SVector<T, NX>,
+        u: &[SVector<T, NU>; N],
+    ) -> Result<(), SetError> {
+        if !(x.iter().all(all_finite) && all_finite(xn) && u.iter().all(all_finite)) {
+            return Err(SetError::NonFinite);
+        }
+        self.x = *x;
+        self.xn = *xn;
+        self.u = *u;
+        self.plan = *u;
+        Ok(())
+    }
+
+    /// The slack penalties in use, `(l1, l2, l1n, l2n)`, as
+    /// [`set_soft_penalties`](Self::set_soft_penalties) last accepted them.
+    pub fn soft_penalties(
+        &self,
+    ) -> (
+        &SVector<T, NG>,
+        &SVector<T, NG>,
+        &SVector<T, NGN>,
+        &SVector<T, NGN>,
+    ) {
+        (&self.l1, &self.l2, &self.l1n, &self.l2n)
+    }
+
+    /// The objective at the current trajectory: the least-squares cost
+    /// `sum_k 1/2 |y_k - yref_k|^2_W + 1/2 |y_N - yref_N|^2_{W_N}` plus the soft rows' slack
+    /// cost at their violation (`l1 v + 1/2 l2 v^2` per violated side,
+    /// [`set_soft_penalties`](Self::set_soft_penalties)). Evaluates the model at every stage.
+    pub fn cost(&self) -> T {
+        self.merit_parts().0
+    }
+
+    /// Lower and upper slacks `(sl, su)` of stage `k < N`'s general constraints in the last
+    /// QP solution (zero for hard rows and absent sides): how far the plan violates them.
+    pub fn slacks(&self, k: usize) -> Option<(SVector<T, NG>, SVector<T, NG>)> {
+        self.solver.slacks(k)
+    }
+
+    /// Lower and upper slacks of the terminal general constraints ([`slacks`](Self::slacks)).
+    pub fn terminal_slacks(&self) -> (SVector<T, NGN>, SVector<T, NGN>) {
+        self.solver.terminal_slacks()
+    }
+
+    /// The multipliers `pi_k` of the dynamics `x_{k+1} = F(x_k, u_k, p_k)` (`k < N`) in the
+    /// last QP solution; the Lagrangian adds `pi_k' (F(x_k, u_k, p_k) - x_{k+1})`.
+    pub fn dynamics_multipliers(&self, k: usize) -> Option<&SVector<T, NX>> {
+        self.solver.solution().pi.get(k)
+    }
+
+    /// The multipliers of stage `k < N`'s general constraints in the last QP (the terminal
+    /// ones: [`terminal_constraint_multipliers`](Self::terminal_constraint_multipliers)):
+    /// `lam_u - lam_l`, positive
+    /// where the upper bound holds the row, negative where the lower one does; the
+    /// Lagrangian adds `lam' h(x_k, u_k, p_k)`. The interior point's values: a QP solved on
+    /// the warm active set or ended by the polish keeps those of the last interior-point
+    /// solve (only QPs without an active general row are solved so; soft rows always go to
+    /// the interior point).
+    pub fn constraint_multipliers(&self, k: usize) -> Option<SVector<T, NG>> {
+        self.solver.row_multipliers(k).map(|(l, u)| u - l)
+    }
+
+    /// The multipliers of the terminal general constraints, as
+    /// [`constraint_multipliers`](Self::constraint_multipliers).
+    pub fn terminal_constraint_multipliers(&self) -> SVector<T, NGN> {
+        let (l, u) = self.solver.terminal_row_multipliers();
+        u - l
+    }
+
+    /// The multipliers of the box bounds of control `k < N` in the last QP, `mu_u - mu_l`
+    /// (positive on an upper bound that holds, negative on a lower one, zero where neither
+    /// does): from the QP's stationarity in `u_k`, `mu = -(R du + S dx + g_u + B'pi_k +
+    /// D'lam_g)`, at its solution (`lam_g` from
+    /// [`constraint_multipliers`](Self::constraint_multipliers)).
+    pub fn control_bound_multipliers(&self, k: usize) -> Option<SVector<T, NU>> {
+        let (s, sol) = (self.qp.stages.get(k)?, self.solver.solution());
+        let (dx, du, pi) = (sol.x.get(k)?, sol.u.get(k)?, sol.pi.get(k)?);
+        let h = self.qp.h(k);
+        let lam = self.constraint_multipliers(k)?;
+        Some(-(h.r * du + h.s * dx + s.gu + tr_mul(&s.b, pi) + tr_mul(&s.d, &lam)))
+    }
+
+    /// The multipliers of the box bounds of state `k` (`1 <= k <= N`; `x_0` is fixed, not
+    /// bounded) in the last QP, as
+    /// [`control_bound_multipliers`](Self::control_bound_multipliers): `-(Q dx + S'du + g_x + A'pi_k - pi_{k-1} +
+    /// C'lam_g)` (at `k = N`, the terminal Hessian and rows, no dynamics ahead).
+    pub fn state_bound_multipliers(&self, k: usize) -> Option<SVector<T, NX>> {
+        let sol = self.solver.solution();
+        let prev = sol.pi.get(k.checked_sub(1)?)?;
+        if k == N {
+            let t = &self.qp.terminal;
+            let lam = self.terminal_constraint_multipliers();
+            return Some(-(t.q * sol.xn + t.gx - prev + tr_mul(&t.c, &lam)));
+        }
+        let (s, h) = (self.qp.stages.get(k)?, self.qp.h(k));
+        let (dx, du, pi) = (sol.x.get(k)?, sol.u.get(k)?, sol.pi.get(k)?);
+        let lam = self.constraint_multipliers(k)?;
+        let r = h.q * dx + tr_mul(&h.s, du) + s.gx + tr_mul(&s.a, pi) - prev;
+        Some(-(r + tr_mul(&s.c, &lam)))
+    }
+
     /// Whether the last preparation condensed the QP ([`QpMethod`](crate::QpMethod)).
     pub fn condensed(&self) -> bool {
         self.solver.condensed()
@@ -827,15 +1053,28 @@ impl<
             self.pin_x0(x0);
             self.plan = self.u;
             self.plan_age = 0;
+            self.failures = 0;
             self.pending_shift = true;
             let u0 = self.u.first().copied().unwrap_or(fallback);
             (u0, self.info(RtiStatus::Ok, qp_info, 1))
         } else {
             // The paper's fallback: keep the last good plan and move along it.
             self.plan_age = (self.plan_age + 1).min(N.saturating_sub(1));
+            self.failures = self.failures.saturating_add(1);
             let u = self.fallback_control();
             self.pending_shift = true;
-            (u, self.info(RtiStatus::UsedPreviousPlan, qp_info, 1))
+            (u, self.info(self.fallback_status(), qp_info, 1))
+        }
+    }
+
+    /// The status of a failed feedback: [`RtiStatus::PlanExhausted`] from the
+    /// `min(fallback_limit, N)`-th failure in a row on, else `UsedPreviousPlan`.
+    fn fallback_status(&self) -> RtiStatus {
+        let limit = (self.settings.fallback_limit as usize).min(N);
+        if self.failures as usize >= limit {
+            RtiStatus::PlanExhausted
+        } else {
+            RtiStatus::UsedPreviousPlan
         }
     }
 
@@ -845,6 +1084,7 @@ impl<
             qp,
             sqp_iterations,
             watchdog_returned: false,
+            consecutive_failures: self.failures,
         }
     }
 
@@ -951,57 +1191,82 @@ impl<
         }
     }
 
-    /// The largest KKT residual of the NLP at the current iterate, from its linearization in
-    /// the QP data (a zero step) and the last QP's dynamics multipliers `pi`: the
-    /// initial-state and dynamics defects, and for each state (but `x_0`, which is fixed)
-    /// and control the natural residual `clamp(-r, lo, hi)` of the Lagrangian's gradient
-    /// `r` against the step's bounds `lo <= 0 <= hi`: `|r|` away from the bounds, the
-    /// distance to a bound that `r` pushes against (a bound multiplier `|r|` of the right
-    /// sign is then complementary to it to that distance), and at least the violation of a
-    /// violated bound. `None` where a general constraint has a bound (its multiplier is not
-    /// kept), or without stages.
-    fn kkt_residual(&self) -> Option<T> {
-        fn bounded<T: Real, const K: usize>(lo: &SVector<T, K>, hi: &SVector<T, K>) -> bool {
-            lo.iter().any(|&l| l > -T::INF) || hi.iter().any(|&h| h < T::INF)
-        }
-        fn natural<T: Real, const K: usize>(
-            r: &SVector<T, K>,
-            lo: &SVector<T, K>,
-            hi: &SVector<T, K>,
-        ) -> T {
-            let mut m = T::ZERO;
-            for i in 0..K {
-                m = m.max((-r[i]).max(lo[i]).min(hi[i]).abs());
-            }
-            m
-        }
+    /// The largest KKT residual of the NLP at the iterate of the last linearization
+    /// ([`prepare`](Self::prepare), or an iteration of [`solve_sqp`](Self::solve_sqp)), from
+    /// its linearization in the QP data (a zero step) and the last QP's multipliers (`pi`,
+    /// and the general rows' from the interior point): the initial-state and dynamics
+    /// defects; for each state (but `x_0`, which is fixed) and control the natural residual
+    /// `clamp(-r, lo, hi)` of the Lagrangian's gradient `r` (with the rows' term `C'lam`)
+    /// against the step's bounds `lo <= 0 <= hi`: `|r|` away from the bounds, the distance to
+    /// a bound that `r` pushes against (a bound multiplier `|r|` of the right sign is then
+    /// complementary to it to that distance), and at least the violation of a violated
+    /// bound; and for each side of a soft general row, with constraint value `c` (`h - lg`,
+    /// `ug - h`), multiplier `lam >= 0` and slack `v = max(-c, 0)`, the natural residual
+    /// `|lam - clamp(lam - c, 0, l1 + l2 v)|` of the penalized row (zero exactly where the
+    /// row holds with `lam` complementary to it, or is violated by `v` with
+    /// `lam = l1 + l2 v`, the slack's optimality). `None` where a hard general row has a
+    /// bound (its multiplier is not kept by every QP path), or without stages.
+    pub fn kkt_residual(&self) -> Option<T> {
         let pi = &self.solver.solution().pi;
         let t = &self.qp.terminal;
-        if N == 0 || bounded(&t.lg, &t.ug) {
+        if N == 0 || !self.rows_kkt_known() {
             return None;
         }
         // `max` passes over NaN: every term is checked to be finite first.
         let mut res = self.qp.x0.amax();
         let mut finite = all_finite(&self.qp.x0);
         let mut prev: Option<&SVector<T, NX>> = None;
-        for (s, pik) in self.qp.stages.iter().zip(pi) {
-            if bounded(&s.lg, &s.ug) {
-                return None;
-            }
-            let ru = s.gu + tr_mul(&s.b, pik);
+        for (k, (s, pik)) in self.qp.stages.iter().zip(pi).enumerate() {
+            let (ll, lu) = self.solver.row_multipliers(k)?;
+            let lam = lu - ll;
+            let ru = s.gu + tr_mul(&s.b, pik) + tr_mul(&s.d, &lam);
             finite &= all_finite(&s.f) && all_finite(&ru);
             res = res.max(s.f.amax()).max(natural(&ru, &s.lbu, &s.ubu));
+            let rows = SoftRows {
+                lo: &self.lg,
+                hi: &self.ug,
+                l1: &self.l1,
+                l2: &self.l2,
+            };
+            res = res.max(rows.residual(&s.lg, &s.ug, &ll, &lu));
             if let Some(pp) = prev {
-                let rx = s.gx + tr_mul(&s.a, pik) - pp;
+                let rx = s.gx + tr_mul(&s.a, pik) - pp + tr_mul(&s.c, &lam);
                 finite &= all_finite(&rx);
                 res = res.max(natural(&rx, &s.lbx, &s.ubx));
             }
             prev = Some(pik);
         }
-        let rxn = prev.map_or(t.gx, |pp| t.gx - pp);
+        let (ll, lu) = self.solver.terminal_row_multipliers();
+        let lam = lu - ll;
+        let rxn = prev.map_or(t.gx, |pp| t.gx - pp) + tr_mul(&t.c, &lam);
         finite &= all_finite(&rxn);
         res = res.max(natural(&rxn, &t.lbx, &t.ubx));
+        let rows = SoftRows {
+            lo: &self.lgn,
+            hi: &self.ugn,
+            l1: &self.l1n,
+            l2: &self.l2n,
+        };
+        res = res.max(rows.residual(&t.lg, &t.ug, &ll, &lu));
         (finite && res.finite()).then_some(res)
+    }
+
+    /// Whether every general row with a bound is soft ([`kkt_residual`](Self::kkt_residual)
+    /// knows its multipliers: soft rows are solved by the interior point alone).
+    fn rows_kkt_known(&self) -> bool {
+        fn all_soft<T: Real, const K: usize>(
+            lo: &SVector<T, K>,
+            hi: &SVector<T, K>,
+            l1: &SVector<T, K>,
+            l2: &SVector<T, K>,
+        ) -> bool {
+            (0..K).all(|i| {
+                let bounded = lo[i] > -T::INF || hi[i] < T::INF;
+                !bounded || l1[i] > T::ZERO || l2[i] > T::ZERO
+            })
+        }
+        all_soft(&self.lg, &self.ug, &self.l1, &self.l2)
+            && all_soft(&self.lgn, &self.ugn, &self.l1n, &self.l2n)
     }
 
     /// Adds the dynamics' part of the Lagrangian Hessian at the last QP's multipliers,
@@ -1182,6 +1447,7 @@ impl<
     fn sqp_converged(&mut self, run: &SqpRun<T>, iterations: u32) -> RtiInfo<T> {
         self.plan = self.u;
         self.plan_age = 0;
+        self.failures = 0;
         self.sqp_info(RtiStatus::Ok, run.last, iterations, run.returned)
     }
 
@@ -1502,4 +1768,99 @@ fn is_diagonal<T: Real, const R: usize>(m: &SMatrix<T, R, R>) -> bool {
     m.iter()
         .enumerate()
         .all(|(idx, &v)| idx % R == idx / R || v == T::ZERO)
+}
+
+/// The natural residual `max_i |clamp(-r_i, lo_i, hi_i)|` of a gradient `r` against a step's
+/// bounds `lo <= 0 <= hi` ([`Rti::kkt_residual`]).
+fn natural<T: Real, const K: usize>(
+    r: &SVector<T, K>,
+    lo: &SVector<T, K>,
+    hi: &SVector<T, K>,
+) -> T {
+    let mut m = T::ZERO;
+    for i in 0..K {
+        m = m.max((-r[i]).max(lo[i]).min(hi[i]).abs());
+    }
+    m
+}
+
+/// The bounds and penalties of general rows, for [`Rti::kkt_residual`].
+struct SoftRows<'a, T: Real, const K: usize> {
+    lo: &'a SVector<T, K>,
+    hi: &'a SVector<T, K>,
+    l1: &'a SVector<T, K>,
+    l2: &'a SVector<T, K>,
+}
+
+impl<T: Real, const K: usize> SoftRows<'_, T, K> {
+    /// The largest natural residual of the penalized rows from the QP's row data at a zero
+    /// step (`qlo = lo - h`, `qhi = hi - h`) and the rows' multipliers. Absent sides (at or
+    /// beyond `Real::INF` in the bounds) and rows without a penalty are skipped.
+    fn residual(
+        &self,
+        qlo: &SVector<T, K>,
+        qhi: &SVector<T, K>,
+        ll: &SVector<T, K>,
+        lu: &SVector<T, K>,
+    ) -> T {
+        let side = |c: T, lam: T, i: usize| {
+            let cap = self.l1[i] + self.l2[i] * (-c).max(T::ZERO);
+            (lam - (lam - c).max(T::ZERO).min(cap)).abs()
+        };
+        let mut m = T::ZERO;
+        for i in 0..K {
+            if !(self.l1[i] > T::ZERO || self.l2[i] > T::ZERO) {
+                continue;
+            }
+            // A lower bound: `c = h - lo = -(lo - h)`; an upper one: `c = hi - h`.
+            if self.lo[i] > -T::INF {
+                m = m.max(side(-qlo[i], ll[i], i));
+            }
+            if self.hi[i] < T::INF {
+                m = m.max(side(qhi[i], lu[i], i));
+            }
+        }
+        m
+    }
+}
+
+/// Whether the symmetric part of `m` is positive semidefinite: its diagonal non-negative
+/// and, where it has off-diagonal entries, no pivot of its symmetric Gaussian elimination
+/// below `-tol` and no zero pivot (within `tol`) with a non-zero column below it, where
+/// `tol` is `R` times the largest diagonal entry times `Real::EPSILON`, times 100.
+fn positive_semidefinite<T: Real, const R: usize>(m: &SMatrix<T, R, R>) -> bool {
+    if !(0..R).all(|i| m[(i, i)] >= T::ZERO) {
+        return false;
+    }
+    is_diagonal(m) || elimination_is_semidefinite(m)
+}
+
+/// The elimination of [`positive_semidefinite`] on `(m + m') / 2`, in its own frame (a copy
+/// of the matrix) that only non-diagonal weights need.
+#[inline(never)]
+fn elimination_is_semidefinite<T: Real, const R: usize>(m: &SMatrix<T, R, R>) -> bool {
+    let mut a = SMatrix::<T, R, R>::zeros();
+    symmetric_part_into(&mut a, m);
+    let big = (0..R).fold(T::ZERO, |b, i| b.max(a[(i, i)]));
+    let tol = big * T::EPSILON * T::lit(100.0 * R as f64);
+    for j in 0..R {
+        let d = a[(j, j)];
+        if d < -tol {
+            return false;
+        }
+        if d <= tol {
+            if (j + 1..R).any(|i| a[(i, j)].abs() > tol) {
+                return false;
+            }
+            continue;
+        }
+        for i in j + 1..R {
+            let l = a[(i, j)] / d;
+            for c in j + 1..R {
+                let v = a[(j, c)];
+                a[(i, c)] -= l * v;
+            }
+        }
+    }
+    true
 }

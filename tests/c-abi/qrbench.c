@@ -366,6 +366,165 @@ static void check_run_time_bounds(const double x0[NX]) {
     free(mem);
 }
 
+/* Creates a solver in fresh memory (*mem to free), NULL on failure (recorded). */
+static quadrotor_rates_solver *fresh_solver(void **mem) {
+    size_t size = 0;
+    quadrotor_rates_solver *s = NULL;
+    *mem = alloc_solver_memory(&size);
+    if (*mem == NULL) {
+        fprintf(stderr, "qrbench.c: out of memory\n");
+        failures++;
+        return NULL;
+    }
+    EXPECT_RC(quadrotor_rates_create(*mem, size, &s), QUADROTOR_RATES_STATUS_OK);
+    return s;
+}
+
+/* Settings from C: read, refused (nothing changes), written back changed. */
+static void check_settings(quadrotor_rates_solver *s) {
+    quadrotor_rates_settings st, bad, now;
+    EXPECT_RC(quadrotor_rates_get_settings(NULL, &st), QUADROTOR_RATES_ERR_NULL);
+    EXPECT_RC(quadrotor_rates_get_settings(s, NULL), QUADROTOR_RATES_ERR_NULL);
+    EXPECT_RC(quadrotor_rates_set_settings(NULL, &st), QUADROTOR_RATES_ERR_NULL);
+    EXPECT_RC(quadrotor_rates_set_settings(s, NULL), QUADROTOR_RATES_ERR_NULL);
+    EXPECT_RC(quadrotor_rates_get_settings(s, &st), QUADROTOR_RATES_STATUS_OK);
+    CHECK(st.qp_max_iter > 0 && st.sqp_max_iter == 50 && st.fallback_limit > 0);
+    CHECK(st.qp_tol_stat > 0.0 && st.sqp_tol > 0.0);
+    bad = st;
+    bad.sqp_tol = NAN;
+    EXPECT_RC(quadrotor_rates_set_settings(s, &bad), QUADROTOR_RATES_ERR_NONFINITE);
+    bad = st;
+    bad.qp_tol_eq = -1e-9;
+    EXPECT_RC(quadrotor_rates_set_settings(s, &bad), QUADROTOR_RATES_ERR_INPUT);
+    bad = st;
+    bad.sqp_max_iter = 0;
+    EXPECT_RC(quadrotor_rates_set_settings(s, &bad), QUADROTOR_RATES_ERR_INPUT);
+    bad = st;
+    bad.shift = 2;
+    EXPECT_RC(quadrotor_rates_set_settings(s, &bad), QUADROTOR_RATES_ERR_INPUT);
+    bad = st;
+    bad.qp_method = 3;
+    EXPECT_RC(quadrotor_rates_set_settings(s, &bad), QUADROTOR_RATES_ERR_INPUT);
+    EXPECT_RC(quadrotor_rates_get_settings(s, &now), QUADROTOR_RATES_STATUS_OK);
+    CHECK(memcmp(&now, &st, sizeof st) == 0);
+    bad = st;
+    bad.shift = !st.shift;
+    bad.sqp_max_iter = 7;
+    bad.sqp_kkt_tol = 1e-7;
+    bad.fallback_limit = 2;
+    EXPECT_RC(quadrotor_rates_set_settings(s, &bad), QUADROTOR_RATES_STATUS_OK);
+    EXPECT_RC(quadrotor_rates_get_settings(s, &now), QUADROTOR_RATES_STATUS_OK);
+    CHECK(memcmp(&now, &bad, sizeof bad) == 0);
+    EXPECT_RC(quadrotor_rates_set_settings(s, &st), QUADROTOR_RATES_STATUS_OK);
+}
+
+/* Per-stage guesses, the whole-trajectory guess and read-back. */
+static void check_guesses(quadrotor_rates_solver *s) {
+    static double x[(HORIZON + 1) * NX], u[HORIZON * NU], xb[(HORIZON + 1) * NX], ub[HORIZON * NU];
+    double one[NX + 1];
+    int i;
+    for (i = 0; i < (HORIZON + 1) * NX; i++) x[i] = 0.01 * i;
+    for (i = 0; i < HORIZON * NU; i++) u[i] = 9.0 + 0.001 * i;
+    EXPECT_RC(quadrotor_rates_set_trajectory_guess(s, NULL, u), QUADROTOR_RATES_ERR_NULL);
+    EXPECT_RC(quadrotor_rates_set_trajectory_guess(s, x, NULL), QUADROTOR_RATES_ERR_NULL);
+    EXPECT_RC(quadrotor_rates_set_trajectory_guess(s, (const double *)((const char *)x + 1), u),
+              QUADROTOR_RATES_ERR_ALIGN);
+    EXPECT_RC(quadrotor_rates_set_trajectory_guess(s, x, u), QUADROTOR_RATES_STATUS_OK);
+    EXPECT_RC(quadrotor_rates_get_trajectory(s, NULL, ub), QUADROTOR_RATES_ERR_NULL);
+    EXPECT_RC(quadrotor_rates_get_trajectory(s, xb, ub), QUADROTOR_RATES_STATUS_OK);
+    CHECK(memcmp(x, xb, sizeof x) == 0 && memcmp(u, ub, sizeof u) == 0);
+    /* A NaN anywhere: refused, nothing changed. */
+    x[5 * NX + 2] = NAN;
+    EXPECT_RC(quadrotor_rates_set_trajectory_guess(s, x, u), QUADROTOR_RATES_ERR_NONFINITE);
+    EXPECT_RC(quadrotor_rates_set_state_guess(s, 5, &x[5 * NX]), QUADROTOR_RATES_ERR_NONFINITE);
+    EXPECT_RC(quadrotor_rates_get_trajectory(s, xb, ub), QUADROTOR_RATES_STATUS_OK);
+    CHECK(xb[5 * NX + 2] == 0.01 * (5 * NX + 2));
+    for (i = 0; i < NX; i++) one[i] = -1.0 - i;
+    EXPECT_RC(quadrotor_rates_set_state_guess(s, HORIZON + 1, one), QUADROTOR_RATES_ERR_STAGE);
+    EXPECT_RC(quadrotor_rates_set_state_guess(s, -1, one), QUADROTOR_RATES_ERR_STAGE);
+    EXPECT_RC(quadrotor_rates_set_state_guess(s, HORIZON, one), QUADROTOR_RATES_STATUS_OK);
+    EXPECT_RC(quadrotor_rates_get_state(s, HORIZON, xb), QUADROTOR_RATES_STATUS_OK);
+    CHECK(memcmp(one, xb, NX * sizeof(double)) == 0);
+    EXPECT_RC(quadrotor_rates_set_control_guess(s, HORIZON, one), QUADROTOR_RATES_ERR_STAGE);
+    EXPECT_RC(quadrotor_rates_set_control_guess(s, 3, one), QUADROTOR_RATES_STATUS_OK);
+    EXPECT_RC(quadrotor_rates_get_control(s, 3, ub), QUADROTOR_RATES_STATUS_OK);
+    CHECK(memcmp(one, ub, NU * sizeof(double)) == 0);
+}
+
+/* Read-outs after a converged full SQP: a KKT point, a finite cost, multipliers per stage. */
+static void check_read_outs(quadrotor_rates_solver *s, const double x0[NX]) {
+    double cost = -1.0, kkt = -1.0, m[NX], sl[1], su[1];
+    static const double hover[NU] = {GRAVITY, 0.0, 0.0, 0.0};
+    static const double hx[NX] = {0.0, 0.0, 2.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
+    EXPECT_RC(quadrotor_rates_set_guess(s, hx, hover), QUADROTOR_RATES_STATUS_OK);
+    EXPECT_RC(quadrotor_rates_set_x0(s, x0), QUADROTOR_RATES_STATUS_OK);
+    EXPECT_RC(quadrotor_rates_solve_sqp(s), QUADROTOR_RATES_STATUS_OK);
+    EXPECT_RC(quadrotor_rates_get_cost(NULL, &cost), QUADROTOR_RATES_ERR_NULL);
+    EXPECT_RC(quadrotor_rates_get_cost(s, NULL), QUADROTOR_RATES_ERR_NULL);
+    EXPECT_RC(quadrotor_rates_get_cost(s, &cost), QUADROTOR_RATES_STATUS_OK);
+    CHECK(cost > 0.0 && isfinite(cost));
+    EXPECT_RC(quadrotor_rates_get_kkt_residual(s, &kkt), QUADROTOR_RATES_STATUS_OK);
+    CHECK(kkt >= 0.0 && kkt <= 1e-5);
+    EXPECT_RC(quadrotor_rates_get_dynamics_multipliers(s, 0, m), QUADROTOR_RATES_STATUS_OK);
+    EXPECT_RC(quadrotor_rates_get_dynamics_multipliers(s, HORIZON, m), QUADROTOR_RATES_ERR_STAGE);
+    EXPECT_RC(quadrotor_rates_get_control_bound_multipliers(s, 0, m), QUADROTOR_RATES_STATUS_OK);
+    EXPECT_RC(quadrotor_rates_get_control_bound_multipliers(s, 0, NULL), QUADROTOR_RATES_ERR_NULL);
+    EXPECT_RC(quadrotor_rates_get_state_bound_multipliers(s, 0, m), QUADROTOR_RATES_ERR_STAGE);
+    EXPECT_RC(quadrotor_rates_get_state_bound_multipliers(s, HORIZON, m), QUADROTOR_RATES_STATUS_OK);
+    EXPECT_RC(quadrotor_rates_get_constraint_multipliers(s, 0, NULL), QUADROTOR_RATES_STATUS_OK);
+    EXPECT_RC(quadrotor_rates_get_terminal_constraint_multipliers(s, NULL), QUADROTOR_RATES_STATUS_OK);
+    EXPECT_RC(quadrotor_rates_get_slacks(s, 0, sl, su), QUADROTOR_RATES_STATUS_OK);
+    EXPECT_RC(quadrotor_rates_get_slacks(s, HORIZON, sl, su), QUADROTOR_RATES_ERR_STAGE);
+    EXPECT_RC(quadrotor_rates_get_terminal_slacks(s, NULL, NULL), QUADROTOR_RATES_STATUS_OK);
+    /* No general rows: the penalty functions take NULL and there is nothing to set. */
+    EXPECT_RC(quadrotor_rates_set_soft_penalties(s, NULL, NULL), QUADROTOR_RATES_STATUS_OK);
+    EXPECT_RC(quadrotor_rates_get_soft_penalties(s, NULL, NULL), QUADROTOR_RATES_STATUS_OK);
+    EXPECT_RC(quadrotor_rates_set_terminal_soft_penalties(NULL, NULL, NULL), QUADROTOR_RATES_ERR_NULL);
+    EXPECT_RC(quadrotor_rates_get_terminal_soft_penalties(s, NULL, NULL), QUADROTOR_RATES_STATUS_OK);
+}
+
+/* QPs that cannot converge (one iteration, no warm active set) fail step after step: the
+   status escalates to PLAN_EXHAUSTED at the fallback_limit-th failure in a row. */
+static void check_escalation(quadrotor_rates_solver *s, const double x0[NX]) {
+    quadrotor_rates_settings st;
+    quadrotor_rates_stats stats;
+    int k, status;
+    EXPECT_RC(quadrotor_rates_get_settings(s, &st), QUADROTOR_RATES_STATUS_OK);
+    st.qp_max_iter = 1;
+    st.qp_warm_active_set = 0;
+    st.qp_polish = 0;
+    st.fallback_limit = 3;
+    EXPECT_RC(quadrotor_rates_set_settings(s, &st), QUADROTOR_RATES_STATUS_OK);
+    EXPECT_RC(quadrotor_rates_set_x0(s, x0), QUADROTOR_RATES_STATUS_OK);
+    for (k = 1; k <= 5; k++) {
+        EXPECT_RC(quadrotor_rates_prepare(s), QUADROTOR_RATES_STATUS_OK);
+        status = quadrotor_rates_feedback(s);
+        EXPECT_RC(quadrotor_rates_get_stats(s, &stats), QUADROTOR_RATES_STATUS_OK);
+        CHECK(stats.consecutive_failures == (unsigned int)k);
+        CHECK(status == (k >= 3 ? QUADROTOR_RATES_STATUS_PLAN_EXHAUSTED
+                                : QUADROTOR_RATES_STATUS_USED_PREVIOUS_PLAN));
+    }
+    st.qp_max_iter = 50;
+    EXPECT_RC(quadrotor_rates_set_settings(s, &st), QUADROTOR_RATES_STATUS_OK);
+    EXPECT_RC(quadrotor_rates_prepare(s), QUADROTOR_RATES_STATUS_OK);
+    EXPECT_RC(quadrotor_rates_feedback(s), QUADROTOR_RATES_STATUS_OK);
+    EXPECT_RC(quadrotor_rates_get_stats(s, &stats), QUADROTOR_RATES_STATUS_OK);
+    CHECK(stats.consecutive_failures == 0);
+}
+
+/* The run-time API of issue 30 on a fresh solver. */
+static void check_run_time_api(const double x0[NX]) {
+    void *mem = NULL;
+    quadrotor_rates_solver *s = fresh_solver(&mem);
+    if (s != NULL) {
+        check_settings(s);
+        check_guesses(s);
+        check_read_outs(s, x0);
+        check_escalation(s, x0);
+    }
+    free(mem);
+}
+
 int main(void) {
     static const double x0[NX] = {0.0, 0.0, 2.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
     const double u_zero[NU] = {0.0, 0.0, 0.0, 0.0};
@@ -439,6 +598,7 @@ int main(void) {
 
     check_not_prepared(x0);
     check_run_time_bounds(x0);
+    check_run_time_api(x0);
     free(mem);
 
     for (i = 0; i < NX; i++) printf(i == 0 ? "%.17g" : " %.17g", x[i]);

@@ -11,7 +11,7 @@ use crate::lower::{Lowered, Named};
 
 /// The C ABI's emitter: the lowered model and the symbol prefix.
 pub(super) struct CAbi<'a> {
-    l: &'a Lowered,
+    pub(super) l: &'a Lowered,
     prefix: String,
 }
 
@@ -21,7 +21,7 @@ impl<'a> CAbi<'a> {
     }
 
     /// The exported symbol `<prefix>_<name>`.
-    fn sym(&self, name: &str) -> Ident {
+    pub(super) fn sym(&self, name: &str) -> Ident {
         format_ident!("{}_{}", self.prefix, name)
     }
 
@@ -61,9 +61,6 @@ impl<'a> CAbi<'a> {
                 if !(mem as usize).is_multiple_of(core::mem::align_of::<Solver>()) {
                     return ERR_ALIGN;
                 }
-                /// Copied into the caller's memory, so that no solver-sized temporary is
-                /// built on the (possibly small) stack of the caller.
-                static UNCONFIGURED: Solver = Solver::unconfigured();
                 let s = mem.cast::<Solver>();
                 // SAFETY: `mem` is non-null, large enough and aligned (checked above) and
                 // does not overlap the static.
@@ -402,6 +399,7 @@ impl<'a> CAbi<'a> {
                         res_eq: i.qp.res_eq,
                         res_ineq: i.qp.res_ineq,
                         mu: i.qp.mu,
+                        consecutive_failures: i.consecutive_failures,
                     },
                     None => Stats {
                         status: 0,
@@ -412,6 +410,7 @@ impl<'a> CAbi<'a> {
                         res_eq: 0.0,
                         res_ineq: 0.0,
                         mu: 0.0,
+                        consecutive_failures: 0,
                     },
                 };
                 0
@@ -463,6 +462,8 @@ pub(super) fn stats_struct() -> TokenStream {
             pub res_ineq: Real,
             /// Complementarity of the last QP.
             pub mu: Real,
+            /// QP failures of `feedback` in a row (`RtiInfo::consecutive_failures`).
+            pub consecutive_failures: c_uint,
         }
     }
 }

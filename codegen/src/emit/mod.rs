@@ -10,8 +10,10 @@
 
 mod body;
 mod c_abi;
+mod c_run_time;
 mod constants;
 mod functions;
+mod run_time;
 mod setters;
 mod solver;
 
@@ -41,13 +43,17 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
     let solver_methods = [
         e.construction(),
         e.settings_access(),
+        e.settings_setter(),
         e.x0_setter(),
         e.param_setters(),
         e.named_param_setters(),
         setters::bounds_api(),
         e.guess_setter(),
+        e.stage_guess_setters(),
+        e.soft_penalty_api(),
         e.phases(),
         e.getters(),
+        e.read_outs(),
     ];
     quote! {
         #(#items)*
@@ -64,16 +70,24 @@ pub(crate) fn ffi(l: &Lowered, opts: &Options) -> TokenStream {
     let items = [
         c_abi::error_codes(),
         c_abi::stats_struct(),
+        c_run_time::settings_struct(),
         c_abi::conversions(),
+        c_run_time::checked_io(),
+        c_run_time::in_place(),
         c.memory(),
         c.x0_and_param_setters(),
         c.named_param_setters(),
         c.guess_setter(),
         c.bounds(),
         c.qp_max_iter_setter(),
+        c.settings_fns(),
+        c.stage_guess_fns(),
+        c.soft_penalty_fns(),
         c.phases(),
         c.getters(),
         c.stats_getter(),
+        c.scalar_read_outs(),
+        c.stage_read_outs(),
     ];
     quote! {
         /// The C ABI (header: `include/<name>.h`). Every function returns a status code
@@ -84,6 +98,7 @@ pub(crate) fn ffi(l: &Lowered, opts: &Options) -> TokenStream {
         pub mod ffi {
             use super::*;
             use core::ffi::{c_int, c_uint, c_void};
+            use mpc_runtime::{QpMethod, QpSettings};
 
             #(#items)*
         }

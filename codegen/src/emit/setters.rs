@@ -37,30 +37,42 @@ impl Emitter<'_> {
     pub(super) fn param_setters(&self) -> TokenStream {
         let n1 = ul(self.l.n + 1);
         quote! {
-            /// Sets the whole parameter vector of stage `k <= N`.
+            /// Sets the whole parameter vector of stage `k <= N`. At stage 0 the weights
+            /// are evaluated from it and checked first.
             ///
             /// # Errors
-            /// [`SetError::NonFinite`], [`SetError::StageOutOfRange`]; nothing changes then.
+            /// [`SetError::NonFinite`], [`SetError::StageOutOfRange`],
+            /// [`SetError::NegativeWeight`] (stage 0: the weights it gives are not positive
+            /// semidefinite); nothing changes then.
             pub fn set_param(&mut self, k: usize, p: &[Real; NP]) -> Result<(), SetError> {
                 let v = SVector::from(*p);
-                let slot = self.p.get_mut(k).ok_or(SetError::StageOutOfRange)?;
-                self.rti.set_param(k, &v)?;
-                *slot = v;
-                if k == 0 {
-                    self.update_weights()?;
+                if !p.iter().all(|e| e.is_finite()) {
+                    return Err(SetError::NonFinite);
                 }
+                if k > N {
+                    return Err(SetError::StageOutOfRange);
+                }
+                if k == 0 {
+                    self.update_weights(&v)?;
+                }
+                self.rti.set_param(k, &v)?;
+                self.p[k] = v;
                 Ok(())
             }
 
-            /// Sets the parameter vector of every stage.
+            /// Sets the parameter vector of every stage (the weights checked first).
             ///
             /// # Errors
-            /// [`SetError::NonFinite`]; nothing changes then.
+            /// [`SetError::NonFinite`], [`SetError::NegativeWeight`]; nothing changes then.
             pub fn set_param_all(&mut self, p: &[Real; NP]) -> Result<(), SetError> {
                 let v = SVector::from(*p);
+                if !p.iter().all(|e| e.is_finite()) {
+                    return Err(SetError::NonFinite);
+                }
+                self.update_weights(&v)?;
                 self.rti.set_param_all(&v)?;
                 self.p = [v; #n1];
-                self.update_weights()
+                Ok(())
             }
 
             /// The parameters of stage `k <= N`.
@@ -68,10 +80,12 @@ impl Emitter<'_> {
                 self.p.get(k).map(|p| (*p).into())
             }
 
-            fn update_weights(&mut self) -> Result<(), SetError> {
+            /// The weights from stage-0 parameters `p0`, set (checked: nothing changes if
+            /// they are refused).
+            fn update_weights(&mut self, p0: &SVector<Real, NP>) -> Result<(), SetError> {
                 let mut w = SMatrix::<Real, NY, NY>::zeros();
                 let mut wn = SMatrix::<Real, NYN, NYN>::zeros();
-                functions::weights(&self.p[0], &mut w, &mut wn);
+                functions::weights(p0, &mut w, &mut wn);
                 self.rti.set_weights(&w, &wn)
             }
         }
@@ -174,7 +188,8 @@ fn stage_param_setters(v: &Named, value: &ParamValue) -> TokenStream {
     } = value;
     let d = doc_lines(&format!(
         "Sets parameter `{}`{} at stage `k <= N`.\n\n# Errors\n\
-         [`SetError::NonFinite`], [`SetError::StageOutOfRange`]; nothing changes then.",
+         [`SetError::NonFinite`], [`SetError::StageOutOfRange`], [`SetError::NegativeWeight`] \
+         (weights from it not positive semidefinite); nothing changes then.",
         v.name, value.doc
     ));
     let d_all = doc_lines(&format!(
@@ -215,7 +230,9 @@ fn global_param_setter(v: &Named, value: &ParamValue) -> TokenStream {
     } = value;
     let d = doc_lines(&format!(
         "Sets global parameter `{}`{} (every stage; the weights are \
-         re-evaluated).\n\n# Errors\n[`SetError::NonFinite`]; nothing changes then.",
+         re-evaluated and checked first).\n\n# Errors\n[`SetError::NonFinite`], \
+         [`SetError::NegativeWeight`] (the weights from it are not positive semidefinite); \
+         nothing changes then.",
         v.name, value.doc
     ));
     quote! {

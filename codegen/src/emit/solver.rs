@@ -136,7 +136,8 @@ impl Emitter<'_> {
                 &self.rti.settings
             }
 
-            /// The settings, to change.
+            /// The settings, to change in place, unchecked: [`set_settings`](Self::set_settings)
+            /// validates them.
             pub fn settings_mut(&mut self) -> &mut RtiSettings<Real> {
                 &mut self.rti.settings
             }
@@ -221,7 +222,10 @@ impl Emitter<'_> {
         });
         // Only the u_prev entries change: the weights are evaluated again only if they read them.
         let weights_again = if self.l.weights_use_u_prev {
-            quote!(let _ = self.update_weights();)
+            quote! {
+                let p0 = self.p[0];
+                let _ = self.update_weights(&p0);
+            }
         } else {
             quote!()
         };
