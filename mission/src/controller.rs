@@ -259,7 +259,11 @@ impl Controller for PaperController {
         OuterStats {
             solver_us: start.elapsed().as_secs_f64() * 1e6,
             qp_iterations: info.qp.iterations,
-            fallback: info.status == paper_pointmass::RtiStatus::UsedPreviousPlan,
+            fallback: matches!(
+                info.status,
+                paper_pointmass::RtiStatus::UsedPreviousPlan
+                    | paper_pointmass::RtiStatus::PlanExhausted
+            ),
         }
     }
 
@@ -381,7 +385,11 @@ impl Controller for NmpcController {
         OuterStats {
             solver_us: start.elapsed().as_secs_f64() * 1e6,
             qp_iterations: info.qp.iterations,
-            fallback: info.status == quadrotor_rates::RtiStatus::UsedPreviousPlan,
+            fallback: matches!(
+                info.status,
+                quadrotor_rates::RtiStatus::UsedPreviousPlan
+                    | quadrotor_rates::RtiStatus::PlanExhausted
+            ),
         }
     }
 

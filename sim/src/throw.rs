@@ -911,7 +911,10 @@ impl ThrowController {
         OuterStats {
             solver_us: start.elapsed().as_secs_f64() * 1e6,
             qp_iterations: info.qp.iterations,
-            fallback: info.status == pm::RtiStatus::UsedPreviousPlan,
+            fallback: matches!(
+                info.status,
+                pm::RtiStatus::UsedPreviousPlan | pm::RtiStatus::PlanExhausted
+            ),
         }
     }
 }

@@ -6,7 +6,7 @@
 use proc_macro2::{Ident, TokenStream};
 use quote::{format_ident, quote};
 
-use super::ul;
+use super::{allow_case, ul};
 use crate::lower::{Lowered, Named};
 
 /// The C ABI's emitter: the lowered model and the symbol prefix.
@@ -83,6 +83,15 @@ impl<'a> CAbi<'a> {
             self.sym("set_param"),
             self.sym("set_param_all"),
         );
+        // A model without parameters takes NULL (a `NP > 0` test in the generated code
+        // would be a comparison clippy calls absurd).
+        let p_null = (self.l.np > 0).then(|| {
+            quote! {
+                if p.is_null() {
+                    return ERR_NULL;
+                }
+            }
+        });
         quote! {
             /// Sets the measured state (`NX_MODEL` values).
             ///
@@ -104,9 +113,7 @@ impl<'a> CAbi<'a> {
             #[unsafe(no_mangle)]
             pub unsafe extern "C" fn #set_param(s: *mut Solver, stage: c_int, p: *const Real) -> c_int {
                 let Some(s) = (unsafe { s.as_mut() }) else { return ERR_NULL };
-                if p.is_null() && NP > 0 {
-                    return ERR_NULL;
-                }
+                #p_null
                 let Ok(k) = usize::try_from(stage) else { return ERR_STAGE };
                 code(s.set_param(k, &read::<NP>(p)))
             }
@@ -118,9 +125,7 @@ impl<'a> CAbi<'a> {
             #[unsafe(no_mangle)]
             pub unsafe extern "C" fn #set_param_all(s: *mut Solver, p: *const Real) -> c_int {
                 let Some(s) = (unsafe { s.as_mut() }) else { return ERR_NULL };
-                if p.is_null() && NP > 0 {
-                    return ERR_NULL;
-                }
+                #p_null
                 code(s.set_param_all(&read::<NP>(p)))
             }
         }
@@ -136,6 +141,7 @@ impl<'a> CAbi<'a> {
     fn named_param_setter(&self, v: &Named) -> TokenStream {
         let cfn = self.sym(&format!("set_{}", v.name));
         let rs = format_ident!("set_{}", v.name);
+        let case = allow_case(&cfn.to_string());
         let len = ul(v.len);
         let value = if v.scalar {
             quote!(unsafe { *value })
@@ -149,6 +155,7 @@ impl<'a> CAbi<'a> {
                 /// # Safety
                 /// `s` from `create`; `value` points to the parameter's entries.
                 #[unsafe(no_mangle)]
+                #case
                 pub unsafe extern "C" fn #cfn(s: *mut Solver, stage: c_int, value: *const Real) -> c_int {
                     let Some(s) = (unsafe { s.as_mut() }) else { return ERR_NULL };
                     if value.is_null() {
@@ -165,6 +172,7 @@ impl<'a> CAbi<'a> {
                 /// # Safety
                 /// `s` from `create`; `value` points to the parameter's entries.
                 #[unsafe(no_mangle)]
+                #case
                 pub unsafe extern "C" fn #cfn(s: *mut Solver, value: *const Real) -> c_int {
                     let Some(s) = (unsafe { s.as_mut() }) else { return ERR_NULL };
                     if value.is_null() {

@@ -66,7 +66,9 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
 
 /// The C ABI module, `pub mod ffi`, in the order of the generated file.
 pub(crate) fn ffi(l: &Lowered, opts: &Options) -> TokenStream {
-    let c = CAbi::new(l, opts.crate_name(&l.name));
+    let prefix = opts.crate_name(&l.name);
+    let case = allow_case(&prefix);
+    let c = CAbi::new(l, prefix);
     let items = [
         c_abi::error_codes(),
         c_abi::stats_struct(),
@@ -95,6 +97,7 @@ pub(crate) fn ffi(l: &Lowered, opts: &Options) -> TokenStream {
         /// pointers for NULL, and never panics or unwinds across the boundary. The solver
         /// lives in memory the caller provides (`memsize` / `memalign` bytes).
         #[allow(unsafe_code)]
+        #case
         pub mod ffi {
             use super::*;
             use core::ffi::{c_int, c_uint, c_void};
@@ -147,6 +150,20 @@ impl<'a> Emitter<'a> {
 }
 
 /// An unsuffixed integer literal.
+/// Whether rustc's `non_snake_case` lint takes `name` as snake case (its own rule: outer
+/// underscores trimmed, no uppercase letter, no double underscore).
+pub(crate) fn is_snake_case(name: &str) -> bool {
+    let inner = name.trim_matches('_');
+    !inner.chars().any(char::is_uppercase) && !inner.contains("__")
+}
+
+/// `#[allow(non_snake_case)]` for an item named from a user's name that is not snake case
+/// (a control `F` gives `u0_F`), so that any legal identifier generates warning-free code;
+/// nothing for a snake-case name, so the crates of such models are unchanged.
+fn allow_case(name: &str) -> Option<TokenStream> {
+    (!is_snake_case(name)).then(|| quote!(#[allow(non_snake_case)]))
+}
+
 fn ul(i: usize) -> proc_macro2::Literal {
     proc_macro2::Literal::usize_unsuffixed(i)
 }

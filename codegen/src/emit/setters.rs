@@ -11,7 +11,7 @@
 use proc_macro2::TokenStream;
 use quote::{format_ident, quote};
 
-use super::{Emitter, doc_lines, doc_text, ul};
+use super::{Emitter, allow_case, doc_lines, doc_text, ul};
 use crate::lower::Named;
 
 impl Emitter<'_> {
@@ -183,6 +183,10 @@ impl ParamValue {
 fn stage_param_setters(v: &Named, value: &ParamValue) -> TokenStream {
     let set = format_ident!("set_{}", v.name);
     let set_all = format_ident!("set_{}_all", v.name);
+    let (case, case_all) = (
+        allow_case(&set.to_string()),
+        allow_case(&set_all.to_string()),
+    );
     let ParamValue {
         ty, copy, finite, ..
     } = value;
@@ -199,6 +203,7 @@ fn stage_param_setters(v: &Named, value: &ParamValue) -> TokenStream {
     ));
     quote! {
         #d
+        #case
         pub fn #set(&mut self, k: usize, value: #ty) -> Result<(), SetError> {
             if !(#finite) {
                 return Err(SetError::NonFinite);
@@ -208,6 +213,7 @@ fn stage_param_setters(v: &Named, value: &ParamValue) -> TokenStream {
             self.set_param(k, &p.into())
         }
         #d_all
+        #case_all
         pub fn #set_all(&mut self, value: #ty) -> Result<(), SetError> {
             if !(#finite) {
                 return Err(SetError::NonFinite);
@@ -225,6 +231,7 @@ fn stage_param_setters(v: &Named, value: &ParamValue) -> TokenStream {
 /// `set_<name>(value)` for a global parameter: every stage, only its own entries.
 fn global_param_setter(v: &Named, value: &ParamValue) -> TokenStream {
     let set = format_ident!("set_{}", v.name);
+    let case = allow_case(&set.to_string());
     let ParamValue {
         ty, copy, finite, ..
     } = value;
@@ -237,6 +244,7 @@ fn global_param_setter(v: &Named, value: &ParamValue) -> TokenStream {
     ));
     quote! {
         #d
+        #case
         pub fn #set(&mut self, value: #ty) -> Result<(), SetError> {
             if !(#finite) {
                 return Err(SetError::NonFinite);

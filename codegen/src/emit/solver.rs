@@ -5,7 +5,7 @@
 use proc_macro2::TokenStream;
 use quote::{format_ident, quote};
 
-use super::{Emitter, doc_lines, doc_text, ul};
+use super::{Emitter, allow_case, doc_lines, doc_text, ul};
 use crate::lower::Named;
 
 impl Emitter<'_> {
@@ -284,6 +284,7 @@ impl Emitter<'_> {
 /// `u0_<name>`: control `v` of the last feedback (a `Real`, or an array for a vector).
 fn control_getter(v: &Named) -> TokenStream {
     let name = format_ident!("u0_{}", v.name);
+    let case = allow_case(&name.to_string());
     let (off, len) = (ul(v.offset), ul(v.len));
     let described = if v.doc.is_empty() {
         String::new()
@@ -297,6 +298,7 @@ fn control_getter(v: &Named) -> TokenStream {
     if v.scalar {
         quote! {
             #d
+            #case
             pub fn #name(&self) -> Real {
                 self.u0[#off]
             }
@@ -304,6 +306,7 @@ fn control_getter(v: &Named) -> TokenStream {
     } else {
         quote! {
             #d
+            #case
             pub fn #name(&self) -> [Real; #len] {
                 let mut out = [0.0; #len];
                 for (i, o) in out.iter_mut().enumerate() {
