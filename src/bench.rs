@@ -125,6 +125,9 @@ macro_rules! fly {
         if let Some(steps) = over.watchdog {
             s.settings_mut().sqp_watchdog = steps;
         }
+        // acados' QR-bench runs keep the last solution in place (no shift): so does this
+        // one, to be compared with them.
+        s.settings_mut().shift = false;
         let cast = |v: f64| v as m::Real;
         let x0: [m::Real; 10] = X0.map(cast);
         // Each mode starts where the peer it is compared with did: the real-time iteration

@@ -286,6 +286,12 @@ enum QpMethodArg {
     Condensed,
 }
 
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum OnOff {
+    On,
+    Off,
+}
+
 #[derive(clap::Args)]
 struct BuildArgs {
     /// The `.mpc` file.
@@ -324,6 +330,12 @@ struct BuildArgs {
     /// bounds only the smaller solver.
     #[arg(long, value_enum, default_value_t = QpMethodArg::Auto)]
     qp_method: QpMethodArg,
+    /// The real-time iteration's shift of the trajectory by one stage before each
+    /// preparation, baked into `default_settings()` (default on; `off` keeps the last
+    /// solution in place, as acados' RTI does). Also at run time: `settings.shift`, C
+    /// `<name>_set_settings`.
+    #[arg(long, value_enum)]
+    shift: Option<OnOff>,
     /// Path of the mpc-runtime crate as written into the generated Cargo.toml, relative to
     /// the output directory (default: this checkout's runtime/, relative to the output).
     #[arg(long)]
@@ -382,7 +394,7 @@ fn build(a: &BuildArgs) -> ExitCode {
             },
             ..QpOptions::default()
         },
-        shift: None,
+        shift: a.shift.map(|s| matches!(s, OnOff::On)),
         c_abi: !a.no_c_abi,
         staticlib: a.staticlib,
         runtime,

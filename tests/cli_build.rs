@@ -160,3 +160,37 @@ fn build_qp_method_option() {
         "{err}"
     );
 }
+
+#[test]
+fn build_takes_the_shift_and_refuses_a_bad_value() {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("cli_build_shift");
+    let _ = std::fs::remove_dir_all(&dir);
+    let out = dir.to_str().unwrap();
+    let (ok, _, err) = mpcc(&[
+        "build",
+        "models/paper_pointmass.mpc",
+        "-o",
+        out,
+        "--shift",
+        "off",
+    ]);
+    assert!(ok, "{err}");
+    let lib = std::fs::read_to_string(dir.join("src/lib.rs")).unwrap();
+    assert!(
+        lib.contains("s.shift = false;"),
+        "the shift is off in default_settings()"
+    );
+    let (ok, _, err) = mpcc(&[
+        "build",
+        "models/paper_pointmass.mpc",
+        "-o",
+        out,
+        "--shift",
+        "maybe",
+    ]);
+    assert!(!ok);
+    assert!(
+        err.contains("--shift") && err.contains("on") && err.contains("off"),
+        "{err}"
+    );
+}

@@ -10,9 +10,9 @@
 //!   iteration limit and tightens its stopping tolerances (`sqp_settings`); nothing else.
 //! - Closed loops with the generated defaults (`Solver::new()`, settings untouched): the
 //!   plant is the model's ODE integrated by RK4 with 10 substeps per interval, here in the
-//!   test; every step's status must be `Ok` and the maneuver must succeed. The cart-pole's
-//!   fails with today's defaults (`shift` off) and passes with the shift on; its test takes
-//!   `default_settings()` as they are, so it passes once the default turns the shift on.
+//!   test; every step's status must be `Ok` and the maneuver must succeed. The same loops
+//!   with the shift off are the evidence for its default (on): the cart-pole then fails,
+//!   the other two fly either way.
 //! - The checked-in crates are what the generator makes of the model files.
 //!
 //! `cargo test --test examples -- --nocapture` prints the deviations from IPOPT and the
@@ -401,25 +401,33 @@ fn planar_quadrotor_converges_to_ipopt() {
 // ---------------------------------------------------------------------------------------
 // Closed loops
 
-/// The pure real-time iteration from the model's first guess, with the generated settings.
-/// FAILS with today's defaults (`shift` off): the QPs fail from step 33 on and the pole
-/// spins (docs/examples.md); with `shift` on it passes
-/// (`cartpole_closed_loop_with_the_shift`). Nothing here names the shift, so this passes
-/// as soon as the default turns it on.
+/// The pure real-time iteration from the model's first guess, with the generated settings
+/// (the shift on, the runtime's default).
 #[test]
 fn cartpole_closed_loop_with_default_settings() {
     let o = cartpole_loop(cartpole::default_settings(), false);
     check_cartpole(&o, "default settings");
 }
 
+/// Why the shift is on by default: without it the swing-up's QPs become infeasible and the
+/// pole spins (the other examples fly either way, below).
 #[test]
-fn cartpole_closed_loop_with_the_shift() {
+fn cartpole_closed_loop_without_the_shift_fails() {
     let settings = RtiSettings {
-        shift: true,
+        shift: false,
         ..cartpole::default_settings()
     };
     let o = cartpole_loop(settings, false);
-    check_cartpole(&o, "shift on");
+    let (since, s_max) = cartpole_summary(&o);
+    println!(
+        "cartpole closed loop (shift off): {} of {CLOSED_LOOP_STEPS} steps not Ok (first: \
+         {:?}); upright from step {since:?}; max |s| = {s_max:.3} m",
+        o.not_ok, o.first_not_ok
+    );
+    assert!(
+        o.not_ok > 0 && s_max > 1.5,
+        "the shift no longer matters here"
+    );
 }
 
 /// Default settings, the real-time iteration started from a plan of `solve_sqp` (its
@@ -451,7 +459,22 @@ fn check_cartpole(o: &Outcome, what: &str) {
 
 #[test]
 fn bicycle_closed_loop_with_default_settings() {
-    let o = bicycle_loop(bicycle::default_settings());
+    check_bicycle(
+        &bicycle_loop(bicycle::default_settings()),
+        "default settings",
+    );
+}
+
+#[test]
+fn bicycle_closed_loop_without_the_shift() {
+    let settings = RtiSettings {
+        shift: false,
+        ..bicycle::default_settings()
+    };
+    check_bicycle(&bicycle_loop(settings), "shift off");
+}
+
+fn check_bicycle(o: &Outcome, what: &str) {
     let min_clearance =
         o.xs.iter()
             .map(|x| clearance(x))
@@ -459,7 +482,7 @@ fn bicycle_closed_loop_with_default_settings() {
     let x = o.xs.last().unwrap();
     let passed = o.xs.iter().position(|x| x[0] > OBSTACLE.0[0]);
     println!(
-        "bicycle closed loop (default settings): {} of {CLOSED_LOOP_STEPS} steps not Ok; \
+        "bicycle closed loop ({what}): {} of {CLOSED_LOOP_STEPS} steps not Ok; \
          smallest clearance {min_clearance:.4} m; past the obstacle's centre at step \
          {passed:?}; final x = {x:.4?}",
         o.not_ok
@@ -476,11 +499,25 @@ fn bicycle_closed_loop_with_default_settings() {
 #[test]
 fn planar_quadrotor_closed_loop_with_default_settings() {
     let (o, terminal) = quad_loop(planar_quadrotor::default_settings());
+    check_quad(&o, &terminal, "default settings");
+}
+
+#[test]
+fn planar_quadrotor_closed_loop_without_the_shift() {
+    let settings = RtiSettings {
+        shift: false,
+        ..planar_quadrotor::default_settings()
+    };
+    let (o, terminal) = quad_loop(settings);
+    check_quad(&o, &terminal, "shift off");
+}
+
+fn check_quad(o: &Outcome, terminal: &[f64], what: &str) {
     let x = o.xs.last().unwrap();
     let arrived = o.xs.iter().position(|x| target_distance(x) < 0.01);
     let late = terminal[5..].iter().fold(0.0_f64, |m, &d| m.max(d));
     println!(
-        "planar_quadrotor closed loop (default settings): {} of {CLOSED_LOOP_STEPS} steps not \
+        "planar_quadrotor closed loop ({what}): {} of {CLOSED_LOOP_STEPS} steps not \
          Ok; within 1 cm of the target from step {arrived:?}; plans' |p_N - target| at most \
          {:.4} m (first step), {late:.5} m from step 5; final x = {x:?}",
         o.not_ok, terminal[0]

@@ -79,7 +79,8 @@ pub struct Options {
     pub crate_name: Option<String>,
     /// QP settings.
     pub qp: QpOptions,
-    /// Shift the trajectory before each preparation (the runtime's default is off).
+    /// Shift the trajectory before each preparation (`None`: the model's `solver { shift }`
+    /// if it says, else the runtime's default, on).
     pub shift: Option<bool>,
     /// Emit the C ABI module and header.
     pub c_abi: bool,

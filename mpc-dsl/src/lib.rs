@@ -47,6 +47,6 @@ pub use ad::{Jacobian, Sparsity};
 pub use error::{DslError, Result};
 pub use graph::{Expr, ExprKind, Graph, IntoExpr};
 pub use linalg::{Matrix, Vector};
-pub use ocp::{Ocp, OcpBuilder, OcpError, OcpWarning, ValidationErrors};
+pub use ocp::{Ocp, OcpBuilder, OcpError, OcpWarning, SolverChoices, ValidationErrors};
 pub use ops::{BinaryOp, UnaryOp};
 pub use program::{Instr, Operand, Program};

@@ -29,7 +29,10 @@ pub struct RtiSettings<T> {
     /// Settings of every QP solve.
     pub qp: QpSettings<T>,
     /// Shift the trajectory by one stage before each preparation (the last stage is repeated).
-    /// Off, the previous solution is the next linearization point as it is.
+    /// Off, the previous solution is the next linearization point as it is. Default on: a
+    /// closed loop whose plan changes along the horizon (a swing-up, a flip) needs it, and
+    /// a set-point loop loses nothing by it (`docs/runtime.md`, "The shift"). Peers' RTI
+    /// without a shift (acados' QR-bench runs) are mirrored by turning it off.
     pub shift: bool,
     /// Iteration limit of [`Rti::solve_sqp`].
     pub sqp_max_iter: u32,
@@ -77,7 +80,7 @@ impl<T: Real> RtiSettings<T> {
     /// control step's multipliers) and the tolerances of a real-time iteration ([`Real::RTI_TOL`]
     /// for stationarity, feasibility and complementarity: 1e-6 in f64; f32 keeps its QP
     /// defaults) and no polish (one Gauss-Newton step's linearization error is far above what
-    /// it corrects; on QR-bench A in f32 it would add 31 % to the feedback), no shift, 50 SQP
+    /// it corrects; on QR-bench A in f32 it would add 31 % to the feedback), the shift, 50 SQP
     /// iterations to `1e-6` (f64) / `1e-4` (f32). The full SQP ([`Rti::solve_sqp`]) solves its
     /// QPs at least to the QP solver's own defaults, polish included.
     pub const DEFAULT: Self = RtiSettings {
@@ -91,7 +94,7 @@ impl<T: Real> RtiSettings<T> {
             warm_active_set: true,
             ..QpSettings::DEFAULT
         },
-        shift: false,
+        shift: true,
         sqp_max_iter: 50,
         sqp_tol: T::SQP_TOL,
         sqp_kkt_tol: T::SQP_TOL,

@@ -34,6 +34,8 @@ fn closed_loop<const N: usize, const NC: usize>(
     let rows = anchor(csv);
     assert_eq!(rows.len(), steps + 1);
     let mut s = qrbench_in::<f64, N, NC>(dt);
+    // acados' runs keep the last solution in place between steps: no shift.
+    s.settings.shift = false;
     s.settings.qp.method = if NC == N {
         QpMethod::Condensed
     } else {

@@ -207,7 +207,8 @@ impl Emitter<'_> {
         if let Some(b) = qp.warm_start_dual {
             fields.push(quote!(s.qp.warm_start_dual = #b;));
         }
-        if let Some(b) = self.opts.shift {
+        // The generator's option wins over the model's choice.
+        if let Some(b) = self.opts.shift.or(self.l.shift) {
             fields.push(quote!(s.shift = #b;));
         }
         match qp.method {

@@ -108,6 +108,8 @@ pub struct Named {
 pub struct Lowered {
     /// Model name.
     pub name: String,
+    /// The model's choice of the real-time iteration's shift (`solver { shift = ...; }`).
+    pub shift: Option<bool>,
     /// States of the model (without the input-rate augmentation).
     pub nx_model: usize,
     /// States of the solver (`nx_model + nu` with an input-rate cost).
@@ -351,6 +353,7 @@ pub fn lower_with<'g>(ocp: &Ocp<'g>, exact_hessian: bool) -> Result<Lowered, Cod
         .is_some_and(|idx| weights_read_u_prev(ocp, &v, idx, cost.weight_outputs));
     Ok(Lowered {
         name: ocp.name.clone(),
+        shift: ocp.solver.shift,
         weights_use_u_prev,
         nx_model: v.xm.len(),
         nx: v.x.len(),

@@ -47,6 +47,8 @@ struct Parser<'s, 'g> {
     model: Option<(String, Span)>,
     horizon: Option<Span>,
     dynamics: Option<Span>,
+    /// Where `solver { shift = ...; }` set the shift (a second one is an error).
+    shift: Option<Span>,
     state_order: Vec<String>,
     variant_found: bool,
     pending_variant: Option<(usize, f64)>,
@@ -95,6 +97,7 @@ pub(super) fn parse<'g>(
         model: None,
         horizon: None,
         dynamics: None,
+        shift: None,
         state_order: Vec::new(),
         variant_found: false,
         pending_variant: None,
@@ -274,7 +277,7 @@ impl<'s, 'g> Parser<'s, 'g> {
 
     fn item(&mut self) -> PResult<()> {
         let span = self.span();
-        let (kw, _) = self.ident("a statement (model, state, control, param, let, dynamics, horizon, cost, constraints, variant)")?;
+        let (kw, _) = self.ident("a statement (model, state, control, param, let, dynamics, horizon, cost, constraints, solver, variant)")?;
         match kw.as_str() {
             "model" => {
                 let (name, nspan) = self.ident("the model name")?;
@@ -303,12 +306,13 @@ impl<'s, 'g> Parser<'s, 'g> {
             "variant" => self.variant(),
             "cost" => self.block(Self::cost_item),
             "constraints" => self.block(Self::constraint_item),
+            "solver" => self.block(Self::solver_item),
             other => {
                 let mut d = syntax(
                     span,
                     format!(
                         "unknown statement `{other}`: expected model, state, control, param, \
-                         let, dynamics, horizon, cost, constraints or variant"
+                         let, dynamics, horizon, cost, constraints, solver or variant"
                     ),
                 );
                 d.label = "unknown statement".into();
@@ -466,6 +470,36 @@ impl<'s, 'g> Parser<'s, 'g> {
         let (dt, _) = self.const_scalar("dt")?;
         self.expect(&Tok::Semi, "`;`")?;
         Ok((n, dt))
+    }
+
+    /// One setting of a `solver { ... }` block: `shift = on;` or `shift = off;`.
+    fn solver_item(&mut self) -> PResult<()> {
+        let (key, kspan) = self.ident("a solver setting (shift)")?;
+        if key != "shift" {
+            return Err(syntax(
+                kspan,
+                format!("unknown solver setting `{key}`: expected `shift = on;` or `shift = off;`"),
+            ));
+        }
+        self.expect(&Tok::Eq, "`=`")?;
+        let (value, vspan) = self.ident("`on` or `off`")?;
+        let on = match value.as_str() {
+            "on" => true,
+            "off" => false,
+            _ => {
+                return Err(syntax(
+                    vspan,
+                    format!("`shift` is `on` or `off`, not `{value}`"),
+                ));
+            }
+        };
+        self.expect(&Tok::Semi, "`;`")?;
+        if self.shift.is_some() {
+            return Err(name_err(kspan, "the shift is given twice"));
+        }
+        self.shift = Some(kspan);
+        self.b.shift(on);
+        Ok(())
     }
 
     fn variant(&mut self) -> PResult<()> {

@@ -24,7 +24,7 @@ use crate::linalg::{Matrix, Vector};
 
 use super::{
     Bounds, Constraint, Cost, Dynamics, Horizon, InputRate, Integrator, Ocp, OcpError, ParamKind,
-    Parameter, Residual, Slack, Stage, Tracking, ValidationErrors, Variable,
+    Parameter, Residual, Slack, SolverChoices, Stage, Tracking, ValidationErrors, Variable,
 };
 
 /// A declaration of a state, control or parameter.
@@ -130,6 +130,7 @@ impl<'g> OcpBuilder<'g> {
                 state_bounds: Bounds::unbounded(0),
                 control_bounds: Bounds::unbounded(0),
                 constraints: Vec::new(),
+                solver: SolverChoices::default(),
             },
             has_dynamics: false,
             has_horizon: false,
@@ -207,6 +208,13 @@ impl<'g> OcpBuilder<'g> {
     pub fn horizon(&mut self, n: usize, dt: f64) -> &mut Self {
         self.has_horizon = true;
         self.ocp.horizon = Horizon { n, dt };
+        self
+    }
+
+    /// The generated solver's default shift of the trajectory between real-time iterations
+    /// (`RtiSettings::shift`; without this call, the runtime's default).
+    pub fn shift(&mut self, on: bool) -> &mut Self {
+        self.ocp.solver.shift = Some(on);
         self
     }
 

@@ -265,6 +265,17 @@ pub struct Ocp<'g> {
     pub control_bounds: Bounds,
     /// General constraints.
     pub constraints: Vec<Constraint<'g>>,
+    /// Solver settings the model chooses (`solver { ... }` in a `.mpc` file).
+    pub solver: SolverChoices,
+}
+
+/// Solver settings a model chooses for its generated solver (`solver { shift = off; }`);
+/// `None` leaves the runtime's default. A generator's own option (`mpcc build --shift`)
+/// wins over the model's.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct SolverChoices {
+    /// The real-time iteration's shift of the trajectory (`RtiSettings::shift`).
+    pub shift: Option<bool>,
 }
 
 fn concat<'g, 'a>(vars: impl Iterator<Item = &'a Variable<'g>>) -> Vector<'g>
