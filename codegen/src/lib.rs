@@ -283,7 +283,7 @@ fn cargo_toml(name: &str, stamp: &str, opts: &Options) -> String {
         "# {stamp}\n[package]\nname = \"{name}\"\nversion = \"0.1.0\"\nedition = \"2024\"\n\
          rust-version = \"1.95\"\nlicense = \"MIT OR Apache-2.0\"\n\
          description = \"mpcc-generated NMPC solver `{name}` ({})\"\npublish = false\n\n\
-         {crate_type}{features}[dependencies]\nlibm = \"0.2\"\nmpc-runtime = {runtime}\n",
+         {crate_type}{features}[dependencies]\nmpc-runtime = {runtime}\n",
         opts.scalar.rust()
     )
 }

@@ -31,6 +31,9 @@ pub mod real;
 mod rows;
 pub mod rti;
 
+/// The math library generated code calls (`mpc_runtime::libm::sin`), so that a crate using a
+/// generated solver needs no dependency of its own on it.
+pub use libm;
 pub use model::Model;
 pub use nalgebra;
 pub use qp::{

@@ -242,5 +242,5 @@ fn libm_fn(name: &str, s: Scalar) -> TokenStream {
         Scalar::F64 => format_ident!("{}", name),
         Scalar::F32 => format_ident!("{}f", name),
     };
-    quote!(libm::#id)
+    quote!(mpc_runtime::libm::#id)
 }
