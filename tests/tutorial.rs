@@ -30,8 +30,14 @@ fn steps(doc: &str) -> Vec<Step> {
             continue;
         }
         let fence = lines.next().unwrap_or_default();
-        assert!(fence.starts_with("```"), "a marker not before a block: {line}");
-        let body: Vec<&str> = lines.by_ref().take_while(|l| !l.starts_with("```")).collect();
+        assert!(
+            fence.starts_with("```"),
+            "a marker not before a block: {line}"
+        );
+        let body: Vec<&str> = lines
+            .by_ref()
+            .take_while(|l| !l.starts_with("```"))
+            .collect();
         match file {
             Some(path) => out.push(Step::File(path.to_string(), body.join("\n") + "\n")),
             None => out.extend(
@@ -95,6 +101,10 @@ fn the_tutorial_works_as_written() {
     }
     println!("{printed}");
     // Both closed loops say where the pendulum ended (and checked it themselves).
-    assert_eq!(printed.matches("after 10 s: theta = 3.1416 rad").count(), 2, "{printed}");
+    assert_eq!(
+        printed.matches("after 10 s: theta = 3.1416 rad").count(),
+        2,
+        "{printed}"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
