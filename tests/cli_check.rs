@@ -1,18 +1,11 @@
 //! `mpcc check` on good and bad `.mpc` files: output, exit status and caret diagnostics.
 
-use std::process::Command;
+mod common;
 
+/// `mpcc ARGS` from the repository root: whether it succeeded, stdout, stderr.
 fn mpcc(args: &[&str]) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_mpcc"))
-        .args(args)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .expect("the mpcc binary runs");
-    (
-        out.status.success(),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
+    let (code, stdout, stderr) = common::mpcc(args);
+    (code == Some(0), stdout, stderr)
 }
 
 #[test]

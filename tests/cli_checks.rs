@@ -2,20 +2,14 @@
 //! clashing names, non-finite constants, functions that are not finite at the guess), with
 //! the file, line and column; `mpcc build` says which files it wrote and which it left.
 
-use std::path::{Path, PathBuf};
-use std::process::Command;
+mod common;
 
+use std::path::{Path, PathBuf};
+
+/// `mpcc ARGS` from the repository root: whether it succeeded, stdout, stderr.
 fn mpcc(args: &[&str]) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_mpcc"))
-        .args(args)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .expect("the mpcc binary runs");
-    (
-        out.status.success(),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
+    let (code, stdout, stderr) = common::mpcc(args);
+    (code == Some(0), stdout, stderr)
 }
 
 /// A small valid model.

@@ -2,12 +2,7 @@
 //! as a crate with its `alloc` feature, whose test builds the solver with `Solver::boxed()`
 //! in a thread with a 2 MiB stack (smaller than the solver) and runs a control step.
 
-use std::path::PathBuf;
-use std::process::Command;
-
-use mpc_codegen::{Options, RuntimeDep, generate};
-use mpc_dsl::Graph;
-use mpc_dsl::lang::{ParseOptions, parse};
+mod support;
 
 const TINY: &str = r#"
 model tiny_long;
@@ -42,44 +37,11 @@ fn boxed_in_a_small_thread() {
 }
 "#;
 
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
-}
-
 #[test]
 fn boxed_solver_with_thousands_of_stages_runs_in_a_2_mib_thread() {
-    let g = Graph::new();
-    let parsed = match parse(&g, TINY, &ParseOptions::default()) {
-        Ok(p) => p,
-        Err(d) => panic!("{}", d.render("tiny.mpc", TINY)),
-    };
-    let mut opts = Options::new();
-    let runtime = root().join("runtime").canonicalize().unwrap();
-    opts.runtime = RuntimeDep::Path(runtime.display().to_string());
-    let krate = generate(&parsed.ocp, &opts).unwrap();
-    let dir = root().join("target/in-place-test/tiny_long");
-    krate.write(&dir).unwrap();
+    let dir = support::write_crate("in-place-test/tiny_long", TINY);
     std::fs::create_dir_all(dir.join("tests")).unwrap();
     std::fs::write(dir.join("tests/step.rs"), STEP_TEST).unwrap();
-    // Its own workspace (the repository's does not list it), the repository's target
-    // directory (the runtime and its dependencies are built there already).
-    let manifest = std::fs::read_to_string(dir.join("Cargo.toml")).unwrap();
-    if !manifest.contains("[workspace]") {
-        std::fs::write(dir.join("Cargo.toml"), format!("{manifest}\n[workspace]\n")).unwrap();
-    }
-    let out = Command::new(env!("CARGO"))
-        .args(["test", "--offline", "--features", "alloc", "--test", "step"])
-        .current_dir(&dir)
-        .env(
-            "CARGO_TARGET_DIR",
-            root().join("target/in-place-test/target"),
-        )
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}\n{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let args = ["test", "--features", "alloc", "--test", "step"];
+    support::cargo(&dir, &args, "in-place-test/target");
 }

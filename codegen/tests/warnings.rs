@@ -2,15 +2,10 @@
 //! stage parameter `G` and a global parameter `H_` (names rustc's `non_snake_case` lint
 //! flags once prefixed: `u0_F`, `set_G_all`, `quad_set_H_`), and a model `Bare` (a crate
 //! name that is not snake case) without parameters (whose C ABI once compared `NP > 0` with
-//! `NP = 0`). Each is generated into its own crate
-//! and checked by `cargo clippy -- -D warnings`, the rules the repository's own crates meet.
+//! `NP = 0`). Each is generated into its own crate and checked by `cargo clippy -- -D
+//! warnings`, the rules the repository's own crates meet.
 
-use std::path::PathBuf;
-use std::process::Command;
-
-use mpc_codegen::{Options, RuntimeDep, generate};
-use mpc_dsl::Graph;
-use mpc_dsl::lang::{ParseOptions, parse};
+mod support;
 
 const NAMES: &str = r#"
 model quad;
@@ -38,50 +33,11 @@ cost {
 }
 "#;
 
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
-}
-
-/// Generates `src` into `target/warnings-test/<dir>` as a crate of its own workspace and
-/// runs clippy on it with warnings denied; panics with clippy's output if it fails.
+/// Generates `src` into its own crate and runs clippy on it with warnings denied.
 fn clippy_clean(dir: &str, src: &str) {
-    let g = Graph::new();
-    let parsed = match parse(&g, src, &ParseOptions::default()) {
-        Ok(p) => p,
-        Err(d) => panic!("{}", d.render("model.mpc", src)),
-    };
-    let mut opts = Options::new();
-    let runtime = root().join("runtime").canonicalize().unwrap();
-    opts.runtime = RuntimeDep::Path(runtime.display().to_string());
-    let krate = generate(&parsed.ocp, &opts).unwrap();
-    let dir = root().join("target/warnings-test").join(dir);
-    krate.write(&dir).unwrap();
-    let manifest = std::fs::read_to_string(dir.join("Cargo.toml")).unwrap();
-    if !manifest.contains("[workspace]") {
-        std::fs::write(dir.join("Cargo.toml"), format!("{manifest}\n[workspace]\n")).unwrap();
-    }
-    let out = Command::new(env!("CARGO"))
-        .args([
-            "clippy",
-            "--offline",
-            "--all-targets",
-            "--",
-            "-D",
-            "warnings",
-        ])
-        .current_dir(&dir)
-        .env(
-            "CARGO_TARGET_DIR",
-            root().join("target/warnings-test/target"),
-        )
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}\n{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let dir = support::write_crate(&format!("warnings-test/{dir}"), src);
+    let args = ["clippy", "--all-targets", "--", "-D", "warnings"];
+    support::cargo(&dir, &args, "warnings-test/target");
 }
 
 #[test]

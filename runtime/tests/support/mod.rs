@@ -3,6 +3,7 @@
 
 #![allow(dead_code)]
 
+pub mod double_integrator;
 pub mod pendulum;
 pub mod quadrotor;
 
