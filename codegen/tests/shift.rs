@@ -31,7 +31,7 @@ fn the_model_chooses_the_shift_and_the_generator_option_wins() {
     // Nothing said: the runtime's default, which is on.
     let none = default_settings("", None);
     assert!(!none.contains("shift"), "{none}");
-    assert!(mpc_runtime::RtiSettings::<f64>::DEFAULT.shift);
+    const { assert!(mpc_runtime::RtiSettings::<f64>::DEFAULT.shift) };
     let off = default_settings("solver { shift = off; }\n", None);
     assert!(off.contains("s.shift = false;"), "{off}");
     let on = default_settings("solver { shift = off; }\n", Some(true));

@@ -2,7 +2,7 @@
 //! failures, per-stage warm starts, weight validation and the read-outs (cost, KKT residual,
 //! slacks, multipliers), checked against values computed here by hand.
 
-use mpc_runtime::{Model, Real, Rti, RtiSettings, RtiStatus, SetError};
+use mpc_runtime::{Rti, RtiSettings, RtiStatus, SetError};
 use nalgebra::{SMatrix, SVector};
 
 mod support;

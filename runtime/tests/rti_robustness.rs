@@ -9,7 +9,7 @@ use support::double_integrator::DoubleIntegrator;
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
-use mpc_runtime::{Model, QpMethod, Real, Rti, RtiStatus, SetError};
+use mpc_runtime::{Model, QpMethod, Rti, RtiStatus, SetError};
 use nalgebra::{SMatrix, SVector};
 
 /// Counts allocations made on the thread that armed it (other test threads do not count).
