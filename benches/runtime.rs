@@ -1,4 +1,4 @@
-//! Criterion benchmarks of the runtime solver on QR-bench (`shared/anchors/README.md`).
+//! Criterion benchmarks of the runtime solver on QR-bench (`docs/bench.md`).
 //!
 //! - `qp/{mpcc,clarabel}/N{10,20}[-step2]`: one QP of the QR-bench closed loop (the one
 //!   prepared at step 10, with 1 control bound active in its solution at N = 10 and none at

@@ -24,7 +24,7 @@ const DURATION: f64 = 4.0;
 /// The problems `--model` selects.
 const MODELS: &str = "qrbench (QR-bench of docs/bench.md), pointmass (the paper's point-mass MPC)";
 
-/// CSV header of the QR-bench closed loops (the anchors' columns).
+/// CSV header of the QR-bench closed loops (the reference data's columns, `tests/data/README.md`).
 const QRBENCH_COLUMNS: &str = "t,px,py,pz,qw,qx,qy,qz,vx,vy,vz,c,wx,wy,wz";
 
 /// CSV header of the point-mass closed loop.
@@ -330,7 +330,7 @@ struct Report {
     csv: Option<PathBuf>,
 }
 
-/// Writes the closed loop in the anchors' columns: row k is the state at t = k dt and the
+/// Writes the closed loop in the reference data's columns: row k is the state at t = k dt and the
 /// control applied then; the last row holds the state only.
 pub(crate) fn write_csv(path: &Path, run: &ClosedLoop) -> std::io::Result<()> {
     use std::fmt::Write as _;

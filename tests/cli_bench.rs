@@ -86,7 +86,7 @@ fn converged_sqp_closed_loop_matches_casadi() {
             );
         }
         // Measured: A 2.65 against 7.77, B 2.54 against 5.88. CasADi's exact-Hessian SQP
-        // took 2.69 on A (the anchors' report): the KKT exit and the watchdog's whole Newton
+        // took 2.69 on A (its reference runs, docs/benchmarks.md): the KKT exit and the watchdog's whole Newton
         // steps (from the hover guess, the first step of A converges in 7 QPs instead of 30)
         // bring ours under 3.
         assert!(

@@ -1,11 +1,11 @@
 """QR-bench model for the CasADi peer (benches/peers/run.py).
 
-Copied from the project's peer anchors (the CasADi anchor scripts, `common.py`, measured
-with casadi 3.8.2) and trimmed. Changes against the anchor copy:
+Copied from the scripts of the CasADi reference runs (`common.py`, run with casadi 3.8.2;
+docs/benchmarks.md, "Reference data") and trimmed. Changes against that copy:
   - kept only the QR-bench model, the NLP builder and the statistics helper; dropped the
     Gauss-Newton Hessian diagonal, JSON/machine helpers and the file helpers;
   - `initial_guess(N, hover=False)` also offers QR-bench's first guess u_k = 0 (the one
-    `mpcc bench` uses); the default stays the anchor's u_k = uref (hover), because CasADi's
+    `mpcc bench` uses); the default stays the reference runs' u_k = uref (hover), because CasADi's
     exact-Hessian sqpmethod diverges from u_k = 0 (measured with benches/peers/run.py).
 
 QR-bench model:
@@ -121,7 +121,7 @@ def build_qrbench_nlp(N, dt):
 
 
 def initial_guess(N, hover=True):
-    """First guess: x_k = X0, u_k = uref if hover (the anchor's), else u_k = 0 (QR-bench)."""
+    """First guess: x_k = X0, u_k = uref if hover (the reference runs'), else u_k = 0 (QR-bench)."""
     u = UREF if hover else [0.0] * NU
     w = []
     for _ in range(N):

@@ -10,15 +10,16 @@ both peers alike):
   (a) CasADi 3.8.2 `sqpmethod` + `qrqp` through Python, two variants:
         sqp : run to convergence (tol_pr = tol_du = 1e-6, max_iter 100; what the paper did)
         rti : RTI-like, one SQP iteration with a full step (max_iter = 1, max_iter_ls = 0)
-      The closed loop and the solver options are the project's peer anchors' (the CasADi
-      anchor script `qrbench_casadi.py`, trimmed here: only these two variants, no CSV/JSON
-      output, no QP-iteration replay). CasADi's first guess is the anchor's hover guess
+      The closed loop and the solver options are those of the CasADi reference runs
+      (docs/benchmarks.md, "Reference data"; their script `qrbench_casadi.py`, trimmed here:
+      only these two variants, no CSV/JSON output, no QP-iteration replay). CasADi's first
+      guess is the reference runs' hover guess
       u_k = uref; QR-bench's (and `mpcc bench`'s) u_k = 0 makes CasADi's exact-Hessian SQP
       diverge (final error 4e84 m in A, and very slow); --casadi-zero-guess tries it.
   (b) mpcc: `mpcc bench --horizon 10|20 [--sqp] --rounds R --json --no-csv` (A and B, RTI
       and converged SQP), with the binary from --mpcc PATH or built here with
       `cargo build --release` in the repository root (found relative to this file).
-Then it prints a Markdown table. Timing hygiene as in the anchors: GC off inside the timed
+Then it prints a Markdown table. Timing hygiene as in the reference runs: GC off inside the timed
 loops, OMP/OPENBLAS/MKL_NUM_THREADS=1, solver chatter sent to /dev/null at the fd level,
 perf_counter_ns per solver call.
 """
@@ -84,7 +85,7 @@ def make_solver(variant, cfg):
 
 
 def closed_loop(S, bounds, Fp, N, dt, hover_guess):
-    """One 4 s closed loop (anchor's loop). Returns per-step wall ns, iterations, final
+    """One 4 s closed loop (the reference runs' loop). Returns per-step wall ns, iterations, final
     position error."""
     nsteps = int(round(C.T_SIM / dt))
     w = C.initial_guess(N, hover=hover_guess)
@@ -161,7 +162,7 @@ def main():
     ap.add_argument("--mpcc-rounds", type=int, default=20,
                     help="closed loops per mpcc invocation (mpcc bench --rounds)")
     ap.add_argument("--casadi-zero-guess", action="store_true",
-                    help="CasADi's first guess u_k = 0 (QR-bench's) instead of the anchor's "
+                    help="CasADi's first guess u_k = 0 (QR-bench's) instead of the reference runs' "
                          "u_k = uref; CasADi diverges from it")
     ap.add_argument("--json-out", default=None, help="also write the raw figures here")
     args = ap.parse_args()
@@ -255,7 +256,7 @@ def main():
     print("- Medians: CasADi = median over reps of each closed loop's per-step median "
           "(wall time of the Python `S(...)` call); mpcc = median over reps of "
           "`mpcc bench`'s pooled per-step medians (prepare + feedback = total).")
-    print("- First guess at t = 0: CasADi x_k = x0, u_k = uref (hover; the anchors'); mpcc "
+    print("- First guess at t = 0: CasADi x_k = x0, u_k = uref (hover, as in the reference runs); mpcc "
           "--sqp the same, mpcc RTI u_k = 0 (QR-bench's, acados'). CasADi's exact-Hessian "
           "SQP diverges from u_k = 0.")
     print("- Converged SQP vs converged SQP solve the same NLP: the final position errors "

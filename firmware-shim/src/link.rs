@@ -5,7 +5,7 @@
 //! drops out of OFFBOARD when the stream pauses (COM_OF_LOSS_T), so the stream never waits
 //! for an acknowledgement.
 //!
-//! Sequence (as PX4 v1.16 accepted it on SITL, `shared/anchors/PX4_OFFBOARD.md`):
+//! Sequence (as PX4 v1.16 accepted it on SITL; `docs/shim.md`):
 //!
 //! 0. ask for ODOMETRY at [`LinkConfig::odometry_rate`] (MAV_CMD_SET_MESSAGE_INTERVAL; PX4
 //!    streams it at 30 Hz on the onboard link otherwise); a refusal is not fatal;

@@ -1,7 +1,7 @@
 //! The MAVLink 2 messages of the offboard link (common dialect), built and read with the
 //! `mavlink` crate; no packet code of our own.
 //!
-//! What PX4 (v1.16, observed on SITL, `shared/anchors/PX4_OFFBOARD.md`) expects and sends:
+//! What PX4 (v1.16, observed on SITL; `docs/shim.md`) expects and sends:
 //!
 //! | direction | message | use |
 //! | --- | --- | --- |

@@ -1,8 +1,8 @@
 //! Reference models and a fixed-step integrator, shared by tests, benchmarks and examples.
 //!
 //! The OCP layer describes models in full (`models/*.mpc`); what is here is the bare ODE of
-//! the quadrotor rate model, the problem every NMPC peer is measured on (QR-bench, see
-//! `shared/anchors/README.md` in the project's planning material and `SEED_PAPER.md`).
+//! the quadrotor rate model, the problem every NMPC peer is measured on (QR-bench, defined in
+//! `docs/bench.md`; the peers' reference data: `docs/benchmarks.md`).
 
 use crate::error::Result;
 use crate::graph::{Expr, Graph};

@@ -30,7 +30,7 @@ fn parse_ok<'g>(g: &'g Graph, src: &str, variant: Option<&str>) -> Ocp<'g> {
     }
 }
 
-/// QR-bench through the Rust builder, written from the anchors README.
+/// QR-bench through the Rust builder, written from its definition in `docs/bench.md`.
 fn quadrotor_rates_builder(g: &Graph) -> Ocp<'_> {
     let mut b = Ocp::builder(g, "quadrotor_rates");
     let p = b.state(
@@ -207,7 +207,7 @@ fn paper_pointmass_file_equals_builder() {
 }
 
 /// QR-bench ODE, hand-written with nalgebra's quaternion product and the rotation formula
-/// printed in the anchors README.
+/// of `models/quadrotor_rates.mpc`.
 fn qr_ode(x: &[f64], u: &[f64]) -> Vec<f64> {
     let q = Quaternion::new(x[3], x[4], x[5], x[6]);
     let omega = Quaternion::new(0.0, u[1], u[2], u[3]);

@@ -6,7 +6,7 @@ use mpc_dsl::{Expr, Graph, Program};
 use nalgebra::Quaternion;
 use proptest::prelude::*;
 
-/// QR-bench's ODE written out by hand from `shared/anchors/README.md`.
+/// QR-bench's ODE written out by hand from its definition (`docs/bench.md`).
 fn rhs_f64(x: &[f64; 10], u: &[f64; 4]) -> [f64; 10] {
     let (qw, qx, qy, qz) = (x[3], x[4], x[5], x[6]);
     let c = u[0];

@@ -4,7 +4,7 @@
 //! which commands it accepts (and acknowledges, twice for a mode change as PX4 v1.16 did), and when
 //! it leaves OFFBOARD because the setpoint stream stopped.
 //!
-//! Rules (PX4 v1.16 as observed, `shared/anchors/PX4_OFFBOARD.md`, and PX4's commander):
+//! Rules (PX4 v1.16 as observed on SITL, `docs/shim.md`, and PX4's commander):
 //!
 //! * OFFBOARD is accepted only while setpoints stream: the last valid SET_ATTITUDE_TARGET
 //!   (finite, thrust in [0, 1], attitude ignored) is younger than

@@ -5,7 +5,7 @@
 pub const X0: [f64; 10] = [0.0, 0.0, 2.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
 
 /// `xdot = f(x, u)`: pdot = v, qdot = 1/2 q ⊗ (0, w), vdot = R(q)(0, 0, c) - (0, 0, 9.81)
-/// (the anchors' formula; u = (c, wx, wy, wz)).
+/// (QR-bench's formula, `docs/bench.md`; u = (c, wx, wy, wz)).
 pub fn ode(x: &[f64; 10], u: &[f64; 4]) -> [f64; 10] {
     let (qw, qx, qy, qz) = (x[3], x[4], x[5], x[6]);
     let (c, wx, wy, wz) = (u[0], u[1], u[2], u[3]);

@@ -1,4 +1,4 @@
-//! Flies QR-bench (`shared/anchors/README.md`: from (0, 0, 2) to hover at (4, 0, 2), 4 s)
+//! Flies QR-bench (`docs/bench.md`: from (0, 0, 2) to hover at (4, 0, 2), 4 s)
 //! with a solver that `build.rs` generated from `models/quadrotor_rates.mpc`.
 //!
 //! `cargo run -p build-rs-example --release`

@@ -1,4 +1,4 @@
-//! The quadrotor rate model of QR-bench (`shared/anchors/README.md`) written by hand: the ODE,
+//! The quadrotor rate model of QR-bench (`docs/bench.md`) written by hand: the ODE,
 //! its Jacobians, and one RK4 step with exact forward sensitivities.
 
 use mpc_runtime::{Model, Real, Rti};
