@@ -144,8 +144,15 @@ mod tests {
             .lines()
             .skip_while(|l| !l.starts_with("$(M_LIB) m-staticlib:"))
             .skip(1)
+            .take_while(|l| !l.is_empty())
             .collect();
         assert_eq!(recipe.len(), 2, "{mk}");
         assert!(recipe.iter().all(|l| l.starts_with('\t')), "{mk}");
+        // The fragment gives the default goal back to the including Makefile.
+        assert!(
+            mk.trim_end()
+                .ends_with(".DEFAULT_GOAL := $(M_DEFAULT_GOAL)"),
+            "{mk}"
+        );
     }
 }
