@@ -83,7 +83,7 @@ $({v}_LIB) {name}-staticlib:
 }
 
 /// The pkg-config file of the host build (release profile, the crate's own `target/`),
-/// located by `${{pcfiledir}}`, so the crate directory can move.
+/// located by `${pcfiledir}`, so the crate directory can move.
 fn pkg_config(name: &str, stamp: &str, real: &str) -> String {
     format!(
         "# {stamp}
