@@ -440,6 +440,10 @@ fn build(a: &BuildArgs) -> ExitCode {
                     c.lines().count()
                 );
             }
+            if a.staticlib && !a.no_c_abi {
+                let dir = a.out.display().to_string();
+                print!("{}", mpc_codegen::glue::usage(&dir, &generated.name));
+            }
             ExitCode::SUCCESS
         }
         Err(e) => {

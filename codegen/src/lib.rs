@@ -22,6 +22,7 @@ mod builder;
 pub mod checks;
 mod emit;
 mod error;
+pub mod glue;
 pub mod lower;
 mod options;
 
@@ -208,6 +209,7 @@ pub fn generate(ocp: &Ocp<'_>, opts: &Options) -> Result<GeneratedCrate, Codegen
             header(&l, &name, &st, opts)?,
         ));
     }
+    files.extend(glue::files(&name, &st, opts));
     Ok(GeneratedCrate { name, files })
 }
 
