@@ -336,10 +336,14 @@ struct BuildArgs {
     /// `<name>_set_settings`.
     #[arg(long, value_enum)]
     shift: Option<OnOff>,
-    /// Path of the mpc-runtime crate as written into the generated Cargo.toml, relative to
-    /// the output directory (default: this checkout's runtime/, relative to the output).
-    #[arg(long)]
+    /// Depend on mpc-runtime by this path (as written into the generated Cargo.toml, relative
+    /// to the output directory) instead of by version.
+    #[arg(long, value_name = "PATH", conflicts_with = "vendor_runtime")]
     runtime_path: Option<String>,
+    /// Write a copy of mpc-runtime's source (embedded in mpcc) into OUT/vendor/mpc-runtime
+    /// and depend on it by path: the crate builds with no network and no checkout of mpcc.
+    #[arg(long)]
+    vendor_runtime: bool,
     /// Do not write: compare with what is in the output directory, exit 1 on any difference.
     #[arg(long)]
     check: bool,
@@ -358,28 +362,13 @@ fn main() -> ExitCode {
     }
 }
 
-/// The runtime crate of this checkout, relative to `out` (`None` if it cannot be expressed).
-fn default_runtime_path(out: &std::path::Path) -> Option<String> {
-    let runtime = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("runtime");
-    let runtime = runtime.canonicalize().ok()?;
-    // `out` may not exist yet; it is created only once generation succeeded.
-    let out = std::path::absolute(out).ok()?;
-    let out = match out.canonicalize() {
-        Ok(c) => c,
-        Err(_) => out,
-    };
-    let rel = mpc_codegen::relative_path(&out, &runtime)?;
-    Some(rel.replace('\\', "/"))
-}
-
 fn build(a: &BuildArgs) -> ExitCode {
     use mpc_codegen::{Options, QpMethod, QpOptions, RuntimeDep, Scalar};
+    // By version unless told otherwise: the default names no path of this machine.
     let runtime = match &a.runtime_path {
         Some(p) => RuntimeDep::Path(p.clone()),
-        None => match default_runtime_path(&a.out) {
-            Some(p) => RuntimeDep::Path(p),
-            None => RuntimeDep::default(),
-        },
+        None if a.vendor_runtime => RuntimeDep::Vendored,
+        None => RuntimeDep::default(),
     };
     let opts = Options {
         scalar: if a.f32 { Scalar::F32 } else { Scalar::F64 },

@@ -9,53 +9,80 @@ use std::time::Instant;
 
 use indicatif::ProgressBar;
 use mpc_codegen::{Options, RuntimeDep};
+use mpc_dsl::Graph;
+use mpc_dsl::lang::{ParseOptions, parse};
 use mpc_sim::mission::Phase;
 
-/// The generated solvers the simulator links, with the model each comes from.
-const SOLVERS: [(&str, &str, &str); 3] = [
-    (
-        "paper",
-        "models/paper_pointmass.mpc",
-        "generated/paper_pointmass",
-    ),
-    (
-        "nmpc",
-        "models/quadrotor_rates.mpc",
-        "generated/quadrotor_rates",
-    ),
-    (
-        "probe",
-        "models/quadrotor_probe.mpc",
-        "generated/quadrotor_probe",
-    ),
+/// A generated solver the simulator links: its controller name, the model it comes from and
+/// the crate's directory, with the text of both embedded at build time (nothing is read from
+/// the checkout at run time, so an installed `mpcc` runs from any directory).
+struct Linked {
+    controller: &'static str,
+    model: &'static str,
+    source: &'static str,
+    dir: &'static str,
+    files: [(&'static str, &'static str); 3],
+}
+
+macro_rules! linked {
+    ($controller:literal, $name:literal) => {
+        Linked {
+            controller: $controller,
+            model: concat!("models/", $name, ".mpc"),
+            source: include_str!(concat!("../models/", $name, ".mpc")),
+            dir: concat!("generated/", $name),
+            files: [
+                (
+                    "Cargo.toml",
+                    include_str!(concat!("../generated/", $name, "/Cargo.toml")),
+                ),
+                (
+                    "src/lib.rs",
+                    include_str!(concat!("../generated/", $name, "/src/lib.rs")),
+                ),
+                (
+                    concat!("include/", $name, ".h"),
+                    include_str!(concat!("../generated/", $name, "/include/", $name, ".h")),
+                ),
+            ],
+        }
+    };
+}
+
+/// The generated solvers the simulator links.
+const SOLVERS: [Linked; 3] = [
+    linked!("paper", "paper_pointmass"),
+    linked!("nmpc", "quadrotor_rates"),
+    linked!("probe", "quadrotor_probe"),
 ];
 
 /// Regenerates the controller's solver from its model and compares it with the crate the
 /// simulator is built with: a stale crate would fly another controller than the model says.
 pub(crate) fn check_solver(controller: &str, quiet: bool) -> Result<(), String> {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let Some((_, model, dir)) = SOLVERS.iter().find(|s| s.0 == controller) else {
+    let Some(s) = SOLVERS.iter().find(|s| s.controller == controller) else {
         return Ok(());
     };
-    if !root.join(model).is_file() {
-        // An installed binary away from its checkout: nothing to compare with.
-        if !quiet {
-            eprintln!("solver: {model} not found beside this binary's sources; check skipped");
-        }
-        return Ok(());
-    }
+    let (model, dir) = (s.model, s.dir);
     let opts = Options {
         runtime: RuntimeDep::Path("../../runtime".into()),
         ..Options::new()
     };
     let t = Instant::now();
-    let generated = mpc_codegen::generate_file(root.join(model), None, &opts)
-        .map_err(|e| format!("{model}: {e}"))?;
-    let stale = generated.check(&root.join(dir));
-    if !stale.is_empty() {
+    let g = Graph::new();
+    let parsed =
+        parse(&g, s.source, &ParseOptions::default()).map_err(|d| d.render(model, s.source))?;
+    let generated =
+        mpc_codegen::generate(&parsed.ocp, &opts).map_err(|e| format!("{model}: {e}"))?;
+    let stale: Vec<&str> = s
+        .files
+        .iter()
+        .filter(|(rel, text)| generated.file(rel) != Some(*text))
+        .map(|(rel, _)| *rel)
+        .collect();
+    if !stale.is_empty() || generated.files.len() != s.files.len() {
         return Err(format!(
             "{dir} is not what {model} generates ({stale:?} differ): regenerate it with \
-             `cargo run -- build {model} -o {dir}` and rebuild"
+             `cargo run -- build {model} --runtime-path ../../runtime -o {dir}` and rebuild"
         ));
     }
     if !quiet {

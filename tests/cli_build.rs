@@ -25,14 +25,15 @@ fn build_writes_a_crate_and_check_detects_drift() {
     let header = std::fs::read_to_string(dir.join("include/paper_pointmass.h")).unwrap();
     assert!(header.contains("typedef float paper_pointmass_real;"));
     let toml = std::fs::read_to_string(dir.join("Cargo.toml")).unwrap();
-    // The runtime dependency is a relative path to this checkout's runtime/.
-    let rel = toml
-        .lines()
-        .find_map(|l| l.strip_prefix("mpc-runtime = { path = \""))
-        .and_then(|r| r.split('"').next())
-        .expect("a path dependency on mpc-runtime");
-    assert!(!rel.starts_with('/'), "{rel}");
-    assert!(dir.join(rel).join("src/lib.rs").is_file(), "{rel}");
+    // The runtime dependency is by version (the runtime's), naming no path of this machine.
+    assert!(
+        toml.contains(&format!(
+            "mpc-runtime = {{ version = \"{}\", default-features = false }}",
+            mpc_codegen::vendor::RUNTIME_VERSION
+        )),
+        "{toml}"
+    );
+    assert!(!toml.contains("path ="), "{toml}");
 
     let (ok, stdout, _) = mpcc(&[
         "build",

@@ -547,7 +547,7 @@ fn the_example_crates_are_current() {
         assert!(
             stale.is_empty(),
             "generated/{name}: {stale:?} differ; regenerate with \
-             `cargo run -- build models/{name}.mpc -o generated/{name}`"
+             `cargo run -- build models/{name}.mpc --runtime-path ../../runtime -o generated/{name}`"
         );
     }
 }

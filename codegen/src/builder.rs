@@ -23,8 +23,12 @@ use crate::options::{Options, QpOptions, Scalar};
 /// `quadrotor::Solver::new()`.
 ///
 /// The module is `pub mod <module>` in `$OUT_DIR/<module>.rs`; it needs `mpc-runtime` and
-/// `libm` as dependencies of the crate that includes it. Cargo is told to rerun the build
-/// script when the model file changes.
+/// `libm` as dependencies of the crate that includes it: the module names `mpc_runtime::...`
+/// and resolves it through that crate's own `[dependencies]`, by version
+/// (`mpc-runtime = { version = "0.1", default-features = false }`, the version of this
+/// `mpc-codegen`) or by path (a checkout, or a copy such as `mpcc build --vendor-runtime`
+/// writes). [`Options::runtime`] plays no part here: no `Cargo.toml` is written. Cargo is
+/// told to rerun the build script when the model file changes.
 #[derive(Clone, Debug)]
 pub struct Builder {
     file: Option<PathBuf>,

@@ -25,6 +25,7 @@ mod error;
 pub mod glue;
 pub mod lower;
 mod options;
+pub mod vendor;
 
 use std::path::{Path, PathBuf};
 
@@ -210,6 +211,9 @@ pub fn generate(ocp: &Ocp<'_>, opts: &Options) -> Result<GeneratedCrate, Codegen
         ));
     }
     files.extend(glue::files(&name, &st, opts));
+    if opts.runtime == RuntimeDep::Vendored {
+        files.extend(vendor::files());
+    }
     Ok(GeneratedCrate { name, files })
 }
 
@@ -265,6 +269,10 @@ fn cargo_toml(name: &str, stamp: &str, opts: &Options) -> String {
     let runtime = match &opts.runtime {
         RuntimeDep::Path(p) => format!("{{ path = \"{p}\", default-features = false }}"),
         RuntimeDep::Version(v) => format!("{{ version = \"{v}\", default-features = false }}"),
+        RuntimeDep::Vendored => format!(
+            "{{ path = \"{}\", default-features = false }}",
+            vendor::VENDOR_DIR
+        ),
     };
     let (crate_type, features) = if opts.staticlib {
         (

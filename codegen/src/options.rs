@@ -60,13 +60,19 @@ pub use mpc_runtime::QpMethod;
 pub enum RuntimeDep {
     /// A path, relative to the generated crate's directory (written as given).
     Path(String),
-    /// A version requirement.
+    /// A version requirement (the default: this generator's runtime version, `X.Y.Z`,
+    /// which cargo reads as `^X.Y.Z`).
     Version(String),
+    /// A copy of the runtime's source, written into the generated crate at
+    /// `vendor/mpc-runtime` (with its own `Cargo.toml`) and depended on by path: the crate
+    /// then builds with no network and no checkout of mpcc (only `nalgebra` and `libm`
+    /// are fetched, or taken from a vendored registry).
+    Vendored,
 }
 
 impl Default for RuntimeDep {
     fn default() -> Self {
-        RuntimeDep::Version(env!("CARGO_PKG_VERSION").to_string())
+        RuntimeDep::Version(crate::vendor::RUNTIME_VERSION.to_string())
     }
 }
 

@@ -142,7 +142,7 @@ fn checked_in_crates_are_current_and_generation_is_deterministic() {
         assert!(
             stale.is_empty(),
             "{dir}: {stale:?} differ from the generator's output; regenerate with \
-             `cargo run -- build {file} -o {dir}{}` (see generated/README.md)",
+             `cargo run -- build {file} --runtime-path ../../runtime -o {dir}{}` (see generated/README.md)",
             variant
                 .map(|v| format!(" --variant {v}"))
                 .unwrap_or_default()

@@ -1,0 +1,205 @@
+//! mpcc and its crates away from this checkout: the `mpcc` binary run from an empty
+//! directory (what `cargo install --path .` gives: the test binary is the same executable,
+//! built from the same sources with models, templates and the runtime's source embedded, only
+//! in another profile), a generated crate with the runtime vendored built offline for the host
+//! and for a bare-metal target and again after being moved, and a crate with the default
+//! versioned dependency built against `mpc-runtime` as `cargo package` packs it.
+//!
+//! The builds are offline: nalgebra and libm are in cargo's cache from this workspace's build.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+/// An empty directory under the system's temporary directory, outside this repository.
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("mpcc-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("the temporary directory is writable");
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .canonicalize()
+        .unwrap();
+    assert!(
+        !dir.canonicalize().unwrap().starts_with(&repo),
+        "{}",
+        dir.display()
+    );
+    dir
+}
+
+/// One target directory for the builds below, so nalgebra is compiled once per target.
+fn target_dir() -> PathBuf {
+    Path::new(env!("CARGO_TARGET_TMPDIR")).join("outside_repo")
+}
+
+fn text(out: &Output) -> String {
+    format!(
+        "{}\n{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    )
+}
+
+/// `mpcc ARGS` with `dir` as the current directory.
+fn mpcc_in(dir: &Path, args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_mpcc"))
+        .args(args)
+        .current_dir(dir)
+        .output()
+        .expect("the mpcc binary runs")
+}
+
+/// `cargo ARGS` in `dir`, offline, building into [`target_dir`]; panics with its output
+/// unless it succeeds.
+fn cargo_in(dir: &Path, args: &[&str]) -> String {
+    let out = Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".into()))
+        .args(args)
+        .arg("--offline")
+        .arg("--target-dir")
+        .arg(target_dir())
+        .current_dir(dir)
+        .env_remove("RUSTFLAGS")
+        .output()
+        .expect("cargo runs");
+    let shown = text(&out);
+    assert!(
+        out.status.success(),
+        "cargo {args:?} in {}:\n{shown}",
+        dir.display()
+    );
+    shown
+}
+
+const MODEL: &str = include_str!("../models/paper_pointmass.mpc");
+
+#[test]
+fn mpcc_works_from_an_empty_directory() {
+    let dir = scratch("anywhere");
+    std::fs::write(dir.join("pointmass.mpc"), MODEL).unwrap();
+
+    let out = mpcc_in(&dir, &["check", "pointmass.mpc"]);
+    assert!(out.status.success(), "{}", text(&out));
+    assert!(text(&out).contains("paper_pointmass"), "{}", text(&out));
+
+    let out = mpcc_in(&dir, &["build", "pointmass.mpc", "-o", "solver"]);
+    assert!(out.status.success(), "{}", text(&out));
+    for f in ["Cargo.toml", "src/lib.rs", "include/paper_pointmass.h"] {
+        assert!(dir.join("solver").join(f).is_file(), "{f}: {}", text(&out));
+    }
+    let toml = std::fs::read_to_string(dir.join("solver/Cargo.toml")).unwrap();
+    assert!(
+        toml.contains("mpc-runtime = { version = ") && !toml.contains("path ="),
+        "{toml}"
+    );
+
+    // The simulator checks its solver against the model it was built from (both embedded)
+    // and writes its log and plots (with the embedded font) here.
+    let out = mpcc_in(&dir, &["sim", "--mission", "hover", "--out", "sim-out"]);
+    let shown = text(&out);
+    assert!(out.status.success(), "{shown}");
+    assert!(shown.contains("identical to the crate linked"), "{shown}");
+    assert!(shown.contains("1 of 1 trials succeeded"), "{shown}");
+    let pngs = std::fs::read_dir(dir.join("sim-out"))
+        .unwrap()
+        .filter(|e| {
+            e.as_ref()
+                .is_ok_and(|e| e.path().extension().is_some_and(|x| x == "png"))
+        })
+        .count();
+    assert!(pngs > 0, "no plots in sim-out: {shown}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_vendored_crate_builds_offline_anywhere_and_for_bare_metal() {
+    let first = scratch("vendored");
+    std::fs::write(first.join("pointmass.mpc"), MODEL).unwrap();
+    let out = mpcc_in(
+        &first,
+        &[
+            "build",
+            "pointmass.mpc",
+            "--vendor-runtime",
+            "--no-c-abi",
+            "-o",
+            "solver",
+        ],
+    );
+    assert!(out.status.success(), "{}", text(&out));
+    let krate = first.join("solver");
+    let toml = std::fs::read_to_string(krate.join("Cargo.toml")).unwrap();
+    assert!(
+        toml.contains("mpc-runtime = { path = \"vendor/mpc-runtime\", default-features = false }"),
+        "{toml}"
+    );
+    let vendored = krate.join("vendor/mpc-runtime");
+    for f in ["Cargo.toml", "src/lib.rs", "LICENSE-MIT", "LICENSE-APACHE"] {
+        assert!(vendored.join(f).is_file(), "vendor/mpc-runtime/{f} missing");
+    }
+    // The vendored copy is the runtime's source as it is in this checkout.
+    let runtime = Path::new(env!("CARGO_MANIFEST_DIR")).join("runtime");
+    for (rel, contents) in mpc_codegen::vendor::RUNTIME_FILES {
+        assert_eq!(
+            std::fs::read_to_string(runtime.join(rel)).unwrap(),
+            *contents,
+            "{rel}"
+        );
+    }
+
+    cargo_in(&krate, &["build"]);
+    let bare = cargo_in(&krate, &["build", "--target", "thumbv7em-none-eabihf"]);
+    assert!(bare.contains("Finished"), "{bare}");
+
+    // Moved elsewhere (the model and the first directory gone), it still builds.
+    let second = scratch("vendored-moved");
+    let moved = second.join("elsewhere");
+    std::fs::rename(&krate, &moved).expect("both under the temporary directory");
+    let _ = std::fs::remove_dir_all(&first);
+    // Cargo would find the artifacts of the first place fresh (it hashes a path package by
+    // its place relative to the workspace): compile both crates again from here.
+    cargo_in(
+        &moved,
+        &["clean", "-p", "paper_pointmass", "-p", "mpc-runtime"],
+    );
+    let rebuilt = cargo_in(&moved, &["build"]);
+    assert!(
+        rebuilt.contains("Compiling mpc-runtime") && rebuilt.contains("Compiling paper_pointmass"),
+        "{rebuilt}"
+    );
+    let _ = std::fs::remove_dir_all(&second);
+}
+
+#[test]
+fn a_versioned_crate_builds_against_the_packaged_runtime() {
+    // `cargo package` packs and verifies mpc-runtime (its build builds the packed crate).
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    cargo_in(root, &["package", "-p", "mpc-runtime", "--allow-dirty"]);
+    let version = mpc_codegen::vendor::RUNTIME_VERSION;
+    let packed = target_dir().join(format!("package/mpc-runtime-{version}"));
+    for f in [
+        "Cargo.toml",
+        "src/lib.rs",
+        "build.rs",
+        "LICENSE-MIT",
+        "README.md",
+    ] {
+        assert!(packed.join(f).is_file(), "{f} not packaged");
+    }
+
+    let dir = scratch("versioned");
+    std::fs::write(dir.join("pointmass.mpc"), MODEL).unwrap();
+    let out = mpcc_in(&dir, &["build", "pointmass.mpc", "-o", "solver"]);
+    assert!(out.status.success(), "{}", text(&out));
+    let krate = dir.join("solver");
+    let toml = std::fs::read_to_string(krate.join("Cargo.toml")).unwrap();
+    let dep = format!("mpc-runtime = {{ version = \"{version}\", default-features = false }}");
+    assert!(toml.contains(&dep), "{toml}");
+    // The default registry's `mpc-runtime` replaced by the packaged one, as it would be
+    // downloaded.
+    let patch = format!(
+        "patch.crates-io.mpc-runtime.path={:?}",
+        packed.to_str().unwrap()
+    );
+    let built = cargo_in(&krate, &["build", "--config", &patch]);
+    assert!(built.contains("Compiling paper_pointmass"), "{built}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
