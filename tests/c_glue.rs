@@ -66,12 +66,16 @@ fn a_c_program_builds_with_the_generated_glue() {
     let tmp = TempDir(std::env::temp_dir().join(format!("mpcc-c-glue-{}", std::process::id())));
     let crate_dir = tmp.0.join(NAME);
     let out_dir = crate_dir.to_str().expect("UTF-8 temporary directory");
+    // This checkout's runtime (the default, a version, is not in the offline cache).
+    let runtime = format!("{}/runtime", env!("CARGO_MANIFEST_DIR"));
     let (code, stdout, stderr) = common::mpcc(&[
         "build",
         "tests/c-glue/glue_di.mpc",
         "-o",
         out_dir,
         "--staticlib",
+        "--runtime-path",
+        &runtime,
     ]);
     assert_eq!(code, Some(0), "mpcc build failed:\n{stdout}\n{stderr}");
     for file in [format!("{NAME}.mk"), format!("{NAME}.pc")] {

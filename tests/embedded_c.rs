@@ -103,6 +103,9 @@ fn solver_staticlib(tmp: &Path) -> PathBuf {
         "--staticlib",
         "-o",
         out_dir,
+        // This checkout's runtime, as the Rust firmware's.
+        "--runtime-path",
+        &format!("{}/runtime", repo().display()),
     ]);
     assert_eq!(code, Some(0), "mpcc build failed:\n{stdout}\n{stderr}");
     std::fs::copy(
