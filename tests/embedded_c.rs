@@ -11,10 +11,12 @@
 #![cfg(unix)]
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
+use std::process::{Command, Stdio};
 use std::time::Duration;
 
 mod common;
+
+use common::{TempDir, run};
 
 const TARGET: &str = "thumbv7em-none-eabihf";
 const NAME: &str = "quadrotor_rates_f32";
@@ -28,32 +30,6 @@ fn repo() -> &'static Path {
 
 fn tmpdir() -> &'static Path {
     Path::new(env!("CARGO_TARGET_TMPDIR"))
-}
-
-fn run(cmd: &mut Command, what: &str) -> Output {
-    let out = cmd.output().unwrap_or_else(|e| {
-        panic!(
-            "{what}: cannot run {:?} ({e}); .ci/run installs the tools",
-            cmd.get_program()
-        )
-    });
-    assert!(
-        out.status.success(),
-        "{what} failed ({}):\n{}\n{}",
-        out.status,
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    out
-}
-
-/// A directory removed when dropped (also when the test fails).
-struct TempDir(PathBuf);
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
 }
 
 /// A cargo command for the thumb target, free of the host build's flags.

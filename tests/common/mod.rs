@@ -76,3 +76,33 @@ pub fn num(v: &serde_json::Value, key: &str) -> f64 {
         .and_then(serde_json::Value::as_f64)
         .unwrap_or_else(|| panic!("{key} missing or not a number in {v}"))
 }
+
+/// Runs `cmd` and returns its output; panics with what it printed if it cannot start or
+/// fails (`.ci/run` installs the tools the tests run).
+#[allow(dead_code)] // not every test binary that includes this module runs tools
+pub fn run(cmd: &mut Command, what: &str) -> std::process::Output {
+    let out = cmd.output().unwrap_or_else(|e| {
+        panic!(
+            "{what}: cannot run {:?} ({e}); .ci/run installs the tools",
+            cmd.get_program()
+        )
+    });
+    assert!(
+        out.status.success(),
+        "{what} failed ({}):\n{}\n{}",
+        out.status,
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
+/// A directory removed when dropped (also when the test fails).
+#[allow(dead_code)] // not every test binary that includes this module makes one
+pub struct TempDir(pub std::path::PathBuf);
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
