@@ -24,6 +24,7 @@
 
 use nalgebra::{ArrayStorage, SMatrix};
 
+pub mod convexify;
 mod kernels;
 pub mod model;
 pub mod qp;

@@ -4,7 +4,8 @@ use nalgebra::{SMatrix, SVector};
 
 use crate::real::Real;
 
-/// A discrete-time optimal control model with a least-squares cost, evaluated stage by stage.
+/// A discrete-time optimal control model with a least-squares cost (and optionally general
+/// cost terms), evaluated stage by stage.
 ///
 /// Dimensions are const generics: `NX` states, `NU` controls, `NP` runtime parameters per
 /// stage, `NY` stage residuals, `NYN` terminal residuals, `NG` general stage constraints,
@@ -12,7 +13,10 @@ use crate::real::Real;
 /// `sum_k 1/2 |y(x_k, u_k, p_k) - yref_k|^2_W + 1/2 |y_N(x_N, p_N) - yref_N|^2_{W_N}`
 /// (Gauss-Newton Hessian `J'WJ`), subject to `x_{k+1} = F(x_k, u_k, p_k)`, box bounds on `x`
 /// and `u` and `lg <= h(x, u, p) <= ug` (hard, or soft with slack penalties: see
-/// [`Rti::set_soft_penalties`](crate::Rti::set_soft_penalties)).
+/// [`Rti::set_soft_penalties`](crate::Rti::set_soft_penalties)). A model with
+/// [`GENERAL_COST`](Self::GENERAL_COST) adds general terms `l(x_k, u_k, p_k)` at every
+/// stage and `l_N(x_N, p_N)` at the end ([`stage_cost`](Self::stage_cost),
+/// [`terminal_cost`](Self::terminal_cost)), with their exact gradients and Hessians.
 ///
 /// Every method writes its Jacobians into the given matrices and returns the value; none may
 /// allocate or panic.
@@ -138,5 +142,97 @@ pub trait Model<
     ) -> SVector<T, NGN> {
         cx.fill(T::ZERO);
         SVector::zeros()
+    }
+
+    /// The model has general cost terms ([`stage_cost`](Self::stage_cost),
+    /// [`terminal_cost`](Self::terminal_cost)): the RTI adds their gradients to the QP's and
+    /// their Hessians, projected onto the positive semidefinite cone, to its Hessians
+    /// (which then differ from stage to stage: `NH = N`), and their values to the cost and
+    /// the merit function. `false` (the default): the methods are not called and the solver
+    /// runs exactly as without them.
+    const GENERAL_COST: bool = false;
+
+    /// The general stage cost `l(x, u, p)` with its gradient (`gx`, `gu`) and Hessian
+    /// (`hxx`, `hux` = `d2l/du dx`, `huu`). Only called when
+    /// [`GENERAL_COST`](Self::GENERAL_COST) holds; the default is zero.
+    #[allow(clippy::too_many_arguments)]
+    fn stage_cost(
+        &self,
+        _x: &SVector<T, NX>,
+        _u: &SVector<T, NU>,
+        _p: &SVector<T, NP>,
+        gx: &mut SVector<T, NX>,
+        gu: &mut SVector<T, NU>,
+        hxx: &mut SMatrix<T, NX, NX>,
+        hux: &mut SMatrix<T, NU, NX>,
+        huu: &mut SMatrix<T, NU, NU>,
+    ) -> T {
+        gx.fill(T::ZERO);
+        gu.fill(T::ZERO);
+        hxx.fill(T::ZERO);
+        hux.fill(T::ZERO);
+        huu.fill(T::ZERO);
+        T::ZERO
+    }
+
+    /// `l(x, u, p)` alone (the merit function and [`Rti::cost`](crate::Rti::cost)). The
+    /// default evaluates [`stage_cost`](Self::stage_cost) and drops the derivatives.
+    fn stage_cost_value(&self, x: &SVector<T, NX>, u: &SVector<T, NU>, p: &SVector<T, NP>) -> T {
+        let (mut gx, mut gu) = (SVector::zeros(), SVector::zeros());
+        let (mut hxx, mut hux, mut huu) = (SMatrix::zeros(), SMatrix::zeros(), SMatrix::zeros());
+        self.stage_cost(x, u, p, &mut gx, &mut gu, &mut hxx, &mut hux, &mut huu)
+    }
+
+    /// The general terminal cost `l_N(x, p)` with its gradient and Hessian. Only called when
+    /// [`GENERAL_COST`](Self::GENERAL_COST) holds; the default is zero.
+    fn terminal_cost(
+        &self,
+        _x: &SVector<T, NX>,
+        _p: &SVector<T, NP>,
+        gx: &mut SVector<T, NX>,
+        hxx: &mut SMatrix<T, NX, NX>,
+    ) -> T {
+        gx.fill(T::ZERO);
+        hxx.fill(T::ZERO);
+        T::ZERO
+    }
+
+    /// `l_N(x, p)` alone. The default evaluates [`terminal_cost`](Self::terminal_cost).
+    fn terminal_cost_value(&self, x: &SVector<T, NX>, p: &SVector<T, NP>) -> T {
+        let (mut gx, mut hxx) = (SVector::zeros(), SMatrix::zeros());
+        self.terminal_cost(x, p, &mut gx, &mut hxx)
+    }
+
+    /// The general constraints' part of the Lagrangian Hessian: the Hessian of
+    /// `mu' h(x, u, p)` over `(x, u)` (`mu` the rows' multipliers, `lam_u - lam_l`, as
+    /// [`Rti::constraint_multipliers`](crate::Rti::constraint_multipliers)). Only called
+    /// when [`EXACT_HESSIAN`](Self::EXACT_HESSIAN) holds; the default writes zeros (linear
+    /// constraints, or a model that leaves their curvature out).
+    #[allow(clippy::too_many_arguments)]
+    fn constraints_hessian(
+        &self,
+        _x: &SVector<T, NX>,
+        _u: &SVector<T, NU>,
+        _p: &SVector<T, NP>,
+        _mu: &SVector<T, NG>,
+        hxx: &mut SMatrix<T, NX, NX>,
+        hux: &mut SMatrix<T, NU, NX>,
+        huu: &mut SMatrix<T, NU, NU>,
+    ) {
+        hxx.fill(T::ZERO);
+        hux.fill(T::ZERO);
+        huu.fill(T::ZERO);
+    }
+
+    /// The Hessian of `mu' h_N(x, p)` over `x` (terminal rows), as
+    /// [`constraints_hessian`](Self::constraints_hessian).
+    fn terminal_constraints_hessian(
+        &self,
+        _x: &SVector<T, NX>,
+        _p: &SVector<T, NP>,
+        _mu: &SVector<T, NGN>,
+        hxx: &mut SMatrix<T, NX, NX>,
+    ) {
+        hxx.fill(T::ZERO);
     }
 }

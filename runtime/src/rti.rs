@@ -15,9 +15,10 @@
 
 use nalgebra::{SMatrix, SVector};
 
+use crate::convexify::{project_psd, project_psd_terminal};
 use crate::kernels::{mul, mul_mostly_zero_into, tr_mul, tr_mul_add_into};
 use crate::model::Model;
-use crate::qp::{OcpQp, QpInfo, QpSettings, QpSolver, QpStatus};
+use crate::qp::{OcpQp, QpHessian, QpInfo, QpSettings, QpSolver, QpStatus};
 use crate::real::Real;
 
 /// Step halvings of the full-SQP line search.
@@ -461,8 +462,9 @@ impl<
     const fn build(model: M, zero: bool) -> Self {
         const {
             assert!(
-                NH == N || (NH == 1 && M::CONSTANT_STAGE_RESIDUAL_JACOBIANS),
-                "NH = 1 (one stage Hessian) needs a model with constant stage residual Jacobians"
+                NH == N || (NH == 1 && M::CONSTANT_STAGE_RESIDUAL_JACOBIANS && !M::GENERAL_COST),
+                "NH = 1 (one stage Hessian) needs a model with constant stage residual Jacobians \
+                 and no general cost"
             )
         };
         let (lo, hi) = if zero {
@@ -825,7 +827,8 @@ impl<
     }
 
     /// The objective at the current trajectory: the least-squares cost
-    /// `sum_k 1/2 |y_k - yref_k|^2_W + 1/2 |y_N - yref_N|^2_{W_N}` plus the soft rows' slack
+    /// `sum_k 1/2 |y_k - yref_k|^2_W + 1/2 |y_N - yref_N|^2_{W_N}`, the general cost terms
+    /// `sum_k l(x_k, u_k, p_k) + l_N(x_N, p_N)` ([`Model::GENERAL_COST`]) plus the soft rows' slack
     /// cost at their violation (`l1 v + 1/2 l2 v^2` per violated side,
     /// [`set_soft_penalties`](Self::set_soft_penalties)). Evaluates the model at every stage.
     pub fn cost(&self) -> T {
@@ -958,9 +961,10 @@ impl<
     }
 
     fn linearize(&mut self) {
-        // With constant residual Jacobians, J'WJ changes only with the weights.
-        let gn = !(M::CONSTANT_STAGE_RESIDUAL_JACOBIANS && self.gn_current);
-        let gn_terminal = !(M::CONSTANT_RESIDUAL_JACOBIANS && self.gn_current);
+        // With constant residual Jacobians, J'WJ changes only with the weights (a general
+        // cost adds to it at every linearization: written again each time).
+        let gn = M::GENERAL_COST || !(M::CONSTANT_STAGE_RESIDUAL_JACOBIANS && self.gn_current);
+        let gn_terminal = M::GENERAL_COST || !(M::CONSTANT_RESIDUAL_JACOBIANS && self.gn_current);
         for k in 0..N {
             let (x, u, p) = (self.x[k], self.u[k], self.p[k]);
             let next = if k + 1 < N { self.x[k + 1] } else { self.xn };
@@ -996,6 +1000,9 @@ impl<
                 mul_mostly_zero_into(&mut h.s, &wjut, &jx);
                 mul_mostly_zero_into(&mut h.r, &wjut, &ju);
             }
+            if M::GENERAL_COST {
+                self.add_general_cost(k);
+            }
         }
         self.linearize_terminal(gn_terminal);
         self.gn_current = true;
@@ -1021,6 +1028,49 @@ impl<
         t.ug = self.ugn - h;
         t.soft_l1 = self.l1n;
         t.soft_l2 = self.l2n;
+        if M::GENERAL_COST {
+            self.add_general_terminal_cost();
+        }
+    }
+
+    /// The general stage cost's gradient at stage `k < N` added to the QP's gradient, and its
+    /// Hessian, projected onto the positive semidefinite cone
+    /// ([`project_psd`](crate::convexify::project_psd)), added to the stage's Hessian (the
+    /// Gauss-Newton terms of the least squares stay as they are). Not inlined: its
+    /// temporaries stay out of the stages' loop.
+    #[inline(never)]
+    fn add_general_cost(&mut self, k: usize) {
+        let (Some(x), Some(u), Some(p)) = (self.x.get(k), self.u.get(k), self.p.get(k)) else {
+            return;
+        };
+        let mut gx = SVector::<T, NX>::zeros();
+        let mut gu = SVector::<T, NU>::zeros();
+        let mut c = QpHessian::<T, NX, NU>::NEW;
+        self.model
+            .stage_cost(x, u, p, &mut gx, &mut gu, &mut c.q, &mut c.s, &mut c.r);
+        project_psd(&mut c);
+        if let Some(s) = self.qp.stages.get_mut(k) {
+            s.gx += gx;
+            s.gu += gu;
+        }
+        let h = self.qp.h_mut(k);
+        h.q += c.q;
+        h.s += c.s;
+        h.r += c.r;
+    }
+
+    /// The general terminal cost's gradient and projected Hessian added to the terminal QP
+    /// ([`add_general_cost`](Self::add_general_cost)).
+    #[inline(never)]
+    fn add_general_terminal_cost(&mut self) {
+        let mut gx = SVector::<T, NX>::zeros();
+        let mut hxx = SMatrix::<T, NX, NX>::zeros();
+        self.model
+            .terminal_cost(&self.xn, &self.pn, &mut gx, &mut hxx);
+        project_psd_terminal(&mut hxx);
+        let t = &mut self.qp.terminal;
+        t.gx += gx;
+        t.q += hxx;
     }
 
     /// Feedback phase: embeds the measured state, solves the QP prepared by
@@ -1146,6 +1196,9 @@ impl<
             let next = if k + 1 < N { &self.x[k + 1] } else { &self.xn };
             let r = self.model.residual(x, u, p, &mut jx, &mut ju) - self.yref[k];
             cost += r.dot(&(self.w * r)) * T::lit(0.5);
+            if M::GENERAL_COST {
+                cost += self.model.stage_cost_value(x, u, p);
+            }
             let d = self.model.dynamics_value(x, u, p) - next;
             defect += d.abs().sum();
             if self.any_soft {
@@ -1158,6 +1211,9 @@ impl<
         let mut jn = SMatrix::<T, NYN, NX>::zeros();
         let r = self.model.terminal_residual(&self.xn, &self.pn, &mut jn) - self.yref_n;
         cost += r.dot(&(self.wn * r)) * T::lit(0.5);
+        if M::GENERAL_COST {
+            cost += self.model.terminal_cost_value(&self.xn, &self.pn);
+        }
         if self.any_soft {
             let mut cx = SMatrix::<T, NGN, NX>::zeros();
             let h = self.model.terminal_constraints(&self.xn, &self.pn, &mut cx);
@@ -1272,36 +1328,123 @@ impl<
             && all_soft(&self.lgn, &self.ugn, &self.l1n, &self.l2n)
     }
 
-    /// Adds the dynamics' part of the Lagrangian Hessian at the last QP's multipliers,
-    /// `sum_i pi_i d2F_i/d(x, u)2` ([`Model::dynamics_hessian`]), to every stage's Hessian of
-    /// the QP (`NH = N`). `Some(added)` where the QP's Hessian is then the Lagrangian's,
-    /// `added` whether it changed (not for zero multipliers, before any QP, whose curvature
-    /// is zero: the Hessian is Gauss-Newton's as it is); `None` for non-finite multipliers.
+    /// Adds the curvature the Gauss-Newton Hessian leaves out to every stage's Hessian of the
+    /// QP (`NH = N`), at the last QP's multipliers: the dynamics' `sum_i pi_i d2F_i/d(x, u)2`
+    /// ([`Model::dynamics_hessian`]), the general constraints' `sum_i mu_i d2h_i`
+    /// ([`Model::constraints_hessian`], terminal rows too) and, with a general cost
+    /// ([`Model::GENERAL_COST`]), the difference between its exact Hessian and the projected
+    /// one [`linearize`](Self::linearize) added. `Some(added)` where the QP's Hessian is
+    /// then the Lagrangian's, `added` whether it changed (not for zero multipliers and a
+    /// convex general cost: the Hessian is then the Lagrangian's as it is); `None` for
+    /// non-finite multipliers.
     fn add_dynamics_curvature(&mut self) -> Option<bool> {
         let pi = &self.solver.solution().pi;
         if NH != N || !pi.iter().all(all_finite) {
             return None;
         }
-        if pi.iter().all(|p| p.iter().all(|&v| v == T::ZERO)) {
+        let mut added = false;
+        if !pi.iter().all(|p| p.iter().all(|&v| v == T::ZERO)) {
+            let mut c = QpHessian::<T, NX, NU>::NEW;
+            for (k, pik) in pi.iter().enumerate() {
+                let (Some(x), Some(u), Some(p)) = (self.x.get(k), self.u.get(k), self.p.get(k))
+                else {
+                    break;
+                };
+                self.model
+                    .dynamics_hessian(x, u, p, pik, &mut c.q, &mut c.s, &mut c.r);
+                let h = self.qp.h_mut(k);
+                h.q += c.q;
+                h.s += c.s;
+                h.r += c.r;
+            }
+            added = true;
+        }
+        added |= self.add_constraint_curvature()?;
+        if M::GENERAL_COST {
+            added |= self.add_cost_curvature();
+        }
+        if added {
+            // The next linearization writes the Gauss-Newton terms again.
+            self.gn_current = false;
+        }
+        Some(added)
+    }
+
+    /// The general constraints' part of [`add_dynamics_curvature`](Self::add_dynamics_curvature):
+    /// `sum_i mu_i d2h_i` at each stage and at the end, with the last QP's row multipliers.
+    /// `Some(added)`; `None` for non-finite multipliers.
+    #[inline(never)]
+    fn add_constraint_curvature(&mut self) -> Option<bool> {
+        if NG == 0 && NGN == 0 {
             return Some(false);
         }
-        let mut hxx = SMatrix::<T, NX, NX>::zeros();
-        let mut hux = SMatrix::<T, NU, NX>::zeros();
-        let mut huu = SMatrix::<T, NU, NU>::zeros();
-        for (k, pik) in pi.iter().enumerate() {
+        let mut added = false;
+        let mut c = QpHessian::<T, NX, NU>::NEW;
+        for k in 0..N {
+            let mu = self.constraint_multipliers(k)?;
+            if !all_finite(&mu) {
+                return None;
+            }
+            if mu.iter().all(|&v| v == T::ZERO) {
+                continue;
+            }
             let (Some(x), Some(u), Some(p)) = (self.x.get(k), self.u.get(k), self.p.get(k)) else {
                 break;
             };
             self.model
-                .dynamics_hessian(x, u, p, pik, &mut hxx, &mut hux, &mut huu);
+                .constraints_hessian(x, u, p, &mu, &mut c.q, &mut c.s, &mut c.r);
             let h = self.qp.h_mut(k);
-            h.q += hxx;
-            h.s += hux;
-            h.r += huu;
+            h.q += c.q;
+            h.s += c.s;
+            h.r += c.r;
+            added = true;
         }
-        // The next linearization writes the Gauss-Newton terms again.
-        self.gn_current = false;
-        Some(true)
+        let mun = self.terminal_constraint_multipliers();
+        if !all_finite(&mun) {
+            return None;
+        }
+        if mun.iter().any(|&v| v != T::ZERO) {
+            self.model
+                .terminal_constraints_hessian(&self.xn, &self.pn, &mun, &mut c.q);
+            self.qp.terminal.q += c.q;
+            added = true;
+        }
+        Some(added)
+    }
+
+    /// The general cost's part of [`add_dynamics_curvature`](Self::add_dynamics_curvature):
+    /// at every stage (and the end) whose cost Hessian the linearization projected, the
+    /// exact Hessian minus the projected one. Whether any stage's changed.
+    #[inline(never)]
+    fn add_cost_curvature(&mut self) -> bool {
+        let mut added = false;
+        let mut gx = SVector::<T, NX>::zeros();
+        let mut gu = SVector::<T, NU>::zeros();
+        for k in 0..N {
+            let (Some(x), Some(u), Some(p)) = (self.x.get(k), self.u.get(k), self.p.get(k)) else {
+                break;
+            };
+            let mut c = QpHessian::<T, NX, NU>::NEW;
+            self.model
+                .stage_cost(x, u, p, &mut gx, &mut gu, &mut c.q, &mut c.s, &mut c.r);
+            let exact = c;
+            if project_psd(&mut c) {
+                let h = self.qp.h_mut(k);
+                h.q += exact.q - c.q;
+                h.s += exact.s - c.s;
+                h.r += exact.r - c.r;
+                added = true;
+            }
+        }
+        let mut hxx = SMatrix::<T, NX, NX>::zeros();
+        self.model
+            .terminal_cost(&self.xn, &self.pn, &mut gx, &mut hxx);
+        let exact = hxx;
+        if project_psd_terminal(&mut hxx) {
+            self.qp.terminal.q += exact - hxx;
+            added = true;
+        }
+        added
     }
 
     /// Full SQP from the current trajectory with `x_0` fixed to `x0`: Gauss-Newton steps, or
