@@ -197,6 +197,9 @@ pub enum Place {
     Residual(String),
     /// The weight of a residual, by the residual's name.
     ResidualWeight(String),
+    /// The expression of a general cost term (`stage NAME = ...;`, `terminal NAME = ...;`),
+    /// by name.
+    GeneralCost(String),
     /// The expression of a general constraint, by name.
     Constraint(String),
     /// The weight `Q`, `R`, `P` or, for the input-rate term, `rate`.

@@ -653,7 +653,21 @@ impl<'s, 'g> Parser<'s, 'g> {
 
     fn cost_item(&mut self) -> PResult<()> {
         let start = self.span();
-        let (kw, kspan) = self.ident("Q, R, P, residual, terminal or rate")?;
+        let (kw, kspan) = self.ident("Q, R, P, residual, terminal, stage or rate")?;
+        // `stage NAME = l;`, `terminal NAME = l;` (but `terminal residual NAME = ...`).
+        let general = match kw.as_str() {
+            "stage" => true,
+            "terminal" => !(self.is_kw("residual") && self.peek_at(1) != Some(&Tok::Eq)),
+            _ => false,
+        };
+        if general {
+            let stage = if kw == "stage" {
+                Stage::Path
+            } else {
+                Stage::Terminal
+            };
+            return self.general_cost(stage);
+        }
         match kw.as_str() {
             "Q" | "R" | "P" => {
                 self.expect(&Tok::Eq, "`=`")?;
@@ -722,10 +736,43 @@ impl<'s, 'g> Parser<'s, 'g> {
             other => Err(syntax(
                 kspan,
                 format!(
-                    "unknown cost term `{other}`: expected Q, R, P, residual, terminal residual or rate"
+                    "unknown cost term `{other}`: expected Q, R, P, residual, terminal residual, \
+                     stage NAME = ..., terminal NAME = ... or rate"
                 ),
             )),
         }
+    }
+
+    /// The rest of a general cost term, `NAME = l;` after `stage` or `terminal`: `l` a
+    /// scalar expression added to the objective as it is.
+    fn general_cost(&mut self, stage: Stage) -> PResult<()> {
+        let (name, nspan) = self.ident("the cost term's name")?;
+        self.expect(&Tok::Eq, "`=`")?;
+        let (v, vspan) = self.expr()?;
+        let Val::S(l) = v else {
+            return Err(semantic(
+                vspan,
+                format!(
+                    "a general cost term must be a scalar, found {}: sum a vector's entries \
+                     (sum(...), dot(...), norm2(...)) or use `residual` for least squares",
+                    v.shape()
+                ),
+            ));
+        };
+        self.expect(&Tok::Semi, "`;`")?;
+        self.source.insert(Place::GeneralCost(name.clone()), vspan);
+        if self
+            .spans
+            .insert(format!("cost term `{name}`"), nspan.clone())
+            .is_some()
+        {
+            return Err(name_err(
+                nspan,
+                format!("cost term `{name}` is given twice"),
+            ));
+        }
+        self.b.general_cost(&name, stage, l);
+        Ok(())
     }
 
     fn constraint_item(&mut self) -> PResult<()> {

@@ -23,8 +23,9 @@ use crate::graph::{Expr, Graph};
 use crate::linalg::{Matrix, Vector};
 
 use super::{
-    Bounds, Constraint, Cost, Dynamics, Horizon, InputRate, Integrator, Ocp, OcpError, ParamKind,
-    Parameter, Residual, Slack, SolverChoices, Stage, Tracking, ValidationErrors, Variable,
+    Bounds, Constraint, Cost, Dynamics, GeneralCost, Horizon, InputRate, Integrator, Ocp, OcpError,
+    ParamKind, Parameter, Residual, Slack, SolverChoices, Stage, Tracking, ValidationErrors,
+    Variable,
 };
 
 /// A declaration of a state, control or parameter.
@@ -258,6 +259,18 @@ impl<'g> OcpBuilder<'g> {
         self.ocp.cost.input_rate = Some(InputRate {
             weight: w,
             prev: prev.iter().copied().collect(),
+        });
+        self
+    }
+
+    /// A general cost term `l(x, u, p)` added to the objective on every stage `k < N`
+    /// ([`Stage::Path`]), or `l_N(x, p)` at `N` ([`Stage::Terminal`]), as it is (no factor
+    /// 1/2). Terms at the same stage are summed, with the least-squares terms.
+    pub fn general_cost(&mut self, name: &str, stage: Stage, l: Expr<'g>) -> &mut Self {
+        self.ocp.cost.general.push(GeneralCost {
+            name: name.to_owned(),
+            stage,
+            expr: l,
         });
         self
     }

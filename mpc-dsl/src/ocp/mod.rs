@@ -16,7 +16,8 @@
 //!   `R` on `k < N`, terminal tracking `x_N - xref_N` with `P`, nonlinear residuals
 //!   `r(x, u, p)` with `W` on `k < N` or `r(x, p)` at `N`, and the input-rate term
 //!   `u_k - u_{k-1}` with its weight on `k < N`, where `u_{-1}` is a runtime parameter (the
-//!   control applied last).
+//!   control applied last). General terms ([`GeneralCost`]) add `l(x_k, u_k, p)` on `k < N`
+//!   and `l_N(x_N, p)` at `N` to that, as they are.
 //! - Parameters are [`ParamKind::Stage`] (one value per stage `0..=N`: references) or
 //!   [`ParamKind::Global`] (one value for the whole horizon: masses, weights).
 //! - Box bounds on controls hold on `k < N`; box bounds on states on `1 <= k <= N`.
@@ -171,6 +172,19 @@ pub struct InputRate<'g> {
     pub prev: Vector<'g>,
 }
 
+/// A general cost term: a scalar expression added to the objective as it is (no factor 1/2,
+/// no weight), `l(x_k, u_k, p)` on every stage `k < N` ([`Stage::Path`]) or `l_N(x_N, p)` at
+/// `N` ([`Stage::Terminal`]). A barrier, an energy or time term, a cost on a nonlinear output.
+#[derive(Clone, Debug, PartialEq)]
+pub struct GeneralCost<'g> {
+    /// Name, used in messages and generated code.
+    pub name: String,
+    /// Path or terminal.
+    pub stage: Stage,
+    /// The term's value.
+    pub expr: Expr<'g>,
+}
+
 /// Every cost term.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Cost<'g> {
@@ -184,6 +198,19 @@ pub struct Cost<'g> {
     pub residuals: Vec<Residual<'g>>,
     /// Input-rate term.
     pub input_rate: Option<InputRate<'g>>,
+    /// General (not least-squares) terms, summed with the least squares.
+    pub general: Vec<GeneralCost<'g>>,
+}
+
+impl<'g> Cost<'g> {
+    /// The sum of the general terms at `stage` (`None` without any).
+    pub fn general_sum(&self, stage: Stage) -> Option<Expr<'g>> {
+        self.general
+            .iter()
+            .filter(|t| t.stage == stage)
+            .map(|t| t.expr)
+            .reduce(|a, b| a + b)
+    }
 }
 
 /// Slack penalties of a soft constraint: `l1 * s + 1/2 l2 * s^2` per violated side.

@@ -476,7 +476,8 @@ impl<'g> Checker<'_, 'g> {
         }
     }
 
-    /// The names of residuals and constraints: unique, and none a declaration's.
+    /// The names of residuals, general cost terms and constraints: unique, and none a
+    /// declaration's.
     fn term_names(&mut self, declared: &HashSet<String>) {
         let ocp = self.ocp;
         let mut term_names = HashSet::new();
@@ -485,6 +486,7 @@ impl<'g> Checker<'_, 'g> {
             .residuals
             .iter()
             .map(|r| &r.name)
+            .chain(ocp.cost.general.iter().map(|t| &t.name))
             .chain(ocp.constraints.iter().map(|c| &c.name))
         {
             if !term_names.insert(n.clone()) || declared.contains(n) {
@@ -517,7 +519,7 @@ impl<'g> Checker<'_, 'g> {
         }
     }
 
-    /// The cost terms: tracking terms, residuals and the input-rate term.
+    /// The cost terms: tracking terms, residuals, general terms and the input-rate term.
     fn costs(&mut self) {
         let ocp = self.ocp;
         let (nx, nu) = (ocp.nx(), ocp.nu());
@@ -540,6 +542,10 @@ impl<'g> Checker<'_, 'g> {
                 r.residual.len(),
                 "the residual",
             );
+        }
+        for t in &ocp.cost.general {
+            let (roles, reason) = stage_roles(t.stage);
+            self.exprs(&format!("cost term `{}`", t.name), &[t.expr], roles, reason);
         }
         if let Some(rate) = &ocp.cost.input_rate {
             self.weight("input-rate weight", &rate.weight, nu, "the control");
