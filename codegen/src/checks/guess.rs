@@ -155,6 +155,15 @@ fn source_items<'g>(ocp: &Ocp<'g>) -> Vec<Item<'g>> {
             });
         }
     }
+    for t in &ocp.cost.general {
+        items.push(Item {
+            function: format!("cost term `{}`", t.name),
+            output: "its value".to_owned(),
+            place: Place::GeneralCost(t.name.clone()),
+            stage: t.stage,
+            expr: t.expr,
+        });
+    }
     for k in &ocp.constraints {
         for (i, &e) in k.expr.iter().enumerate() {
             items.push(Item {
@@ -239,6 +248,27 @@ fn lowered_problems(ocp: &Ocp<'_>, l: &Lowered) -> Vec<Problem> {
     if let Some(f) = &l.dynamics_hessian {
         functions.push(("the dynamics' Hessian", path, f, Box::new(|_, _| None)));
     }
+    // The general terms' derivatives, located at the first term of their stage.
+    let first_term = |stage: Stage| {
+        (ocp.cost.general.iter())
+            .find(|t| t.stage == stage)
+            .map(|t| Place::GeneralCost(t.name.clone()))
+    };
+    if let Some(c) = &l.general_cost {
+        let (at, at_n) = (first_term(path), first_term(term));
+        functions.push((
+            "the general stage cost's derivatives",
+            path,
+            &c.stage,
+            Box::new(move |_, _| at.clone()),
+        ));
+        functions.push((
+            "the general terminal cost's derivatives",
+            term,
+            &c.terminal,
+            Box::new(move |_, _| at_n.clone()),
+        ));
+    }
     if let Some(f) = &l.constraints {
         functions.push(("the constraints", path, f, Box::new(|_, i| con(i))));
     }
@@ -275,7 +305,7 @@ fn first_non_finite(f: &Function, l: &Lowered) -> Option<(Target, f64)> {
             Arg::U => l.u_guess[i],
             Arg::P => l.p_default[i],
             // The multipliers are not known before solving: 1 hides nothing.
-            Arg::Pi => 1.0,
+            Arg::Pi | Arg::Mu => 1.0,
         })
         .collect();
     let values = f.program.eval(&inputs).ok()?;

@@ -152,6 +152,7 @@ impl Statements<'_> {
                     Arg::U => quote!(u),
                     Arg::P => quote!(p),
                     Arg::Pi => quote!(pi),
+                    Arg::Mu => quote!(mu),
                 };
                 let i = ul(i);
                 quote!(#name[#i])

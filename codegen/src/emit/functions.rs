@@ -11,7 +11,8 @@ use crate::options::Scalar;
 impl Emitter<'_> {
     /// `pub mod functions`: the helpers the bodies call, then dynamics, dynamics value,
     /// dynamics Hessian (exact Hessian only), residual, terminal residual, weights,
-    /// constraints and terminal constraints (when the model has them).
+    /// constraints and terminal constraints (when the model has them), the general cost's
+    /// and the constraints' Hessians (`general_cost.rs`, those the model has).
     pub(super) fn functions_module(&self) -> TokenStream {
         let mut uses = Uses::default();
         let fns = [
@@ -23,6 +24,8 @@ impl Emitter<'_> {
             self.weights_fn(&mut uses),
             self.constraints_fn(&mut uses),
             self.terminal_constraints_fn(&mut uses),
+            self.general_cost_fns(&mut uses),
+            self.constraints_hessian_fns(&mut uses),
         ];
         let helpers = helpers(&uses, self.s);
         quote! {
@@ -260,6 +263,8 @@ impl Emitter<'_> {
         let constant_stage_jacobians = self.l.constant_stage_residual_jacobians;
         let hessian = self.model_dynamics_hessian();
         let constraints = self.model_constraints();
+        let general_cost = self.model_general_cost();
+        let constraints_hessian = self.model_constraints_hessian();
         quote! {
             /// The model, as the runtime's solver evaluates it.
             #[derive(Clone, Copy, Debug, Default)]
@@ -311,6 +316,8 @@ impl Emitter<'_> {
                 }
 
                 #constraints
+                #general_cost
+                #constraints_hessian
             }
         }
     }

@@ -13,6 +13,7 @@ mod c_abi;
 mod c_run_time;
 mod constants;
 mod functions;
+mod general_cost;
 mod run_time;
 mod setters;
 mod solver;
@@ -139,8 +140,11 @@ impl<'a> Emitter<'a> {
         let nc = condensing_storage(l, self.opts);
         let (nbx, nr) = bound_rows_and_riccati(l, nc);
         // One stage Hessian in the QP when `J'WJ` is the same at every stage (and no exact
-        // Hessian adds the dynamics' curvature stage by stage).
-        let nh = if l.constant_stage_residual_jacobians && l.dynamics_hessian.is_none() {
+        // Hessian adds the dynamics' curvature, no general cost its Hessian, stage by stage).
+        let nh = if l.constant_stage_residual_jacobians
+            && l.dynamics_hessian.is_none()
+            && l.general_cost.is_none()
+        {
             1
         } else {
             l.n

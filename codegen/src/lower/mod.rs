@@ -32,6 +32,7 @@ mod constraints;
 mod cost;
 mod data;
 mod dynamics;
+mod general_cost;
 
 use mpc_dsl::ocp::{ParamKind, Stage, Variable};
 use mpc_dsl::{DslError, Expr, Graph, Ocp, Program, Vector};
@@ -41,6 +42,8 @@ use constraints::StackedConstraints;
 use cost::{lower_cost, weights_read_u_prev};
 use data::{guesses, named, state_bounds, u_prev_entries};
 use dynamics::{discretize, dynamics_functions, dynamics_hessian};
+pub use general_cost::GeneralCostFunctions;
+use general_cost::{constraints_hessian, general_cost};
 
 /// Which argument of a model function an input is.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -53,6 +56,8 @@ pub enum Arg {
     P,
     /// The dynamics multipliers `pi` (one per state), of the Lagrangian Hessian.
     Pi,
+    /// The general constraints' multipliers `mu` (one per row), of the Lagrangian Hessian.
+    Mu,
 }
 
 /// Where an output of a [`Function`] is written.
@@ -149,6 +154,13 @@ pub struct Lowered {
     /// Every entry of the stage residual's `J_x` and `J_u` is a constant (the terminal
     /// residual may be nonlinear): one `J'WJ` serves every stage.
     pub constant_stage_residual_jacobians: bool,
+    /// The general cost terms' sums with their gradients and Hessians (a model with
+    /// general terms only).
+    pub general_cost: Option<GeneralCostFunctions>,
+    /// The Hessian of `mu' h(x, u, p)` over `(x, u)` (with `exact_hessian` and `ng > 0`).
+    pub constraints_hessian: Option<Function>,
+    /// The Hessian of `mu' h_N(x, p)` over `x` (with `exact_hessian` and `ngn > 0`).
+    pub terminal_constraints_hessian: Option<Function>,
     /// `h`, `C_x`, `C_u` (when `ng > 0`).
     pub constraints: Option<Function>,
     /// `h_N`, `C_x` (when `ngn > 0`).
@@ -213,6 +225,7 @@ struct Builder<'g> {
     u: Vec<Expr<'g>>,
     p: Vec<Expr<'g>>,
     pi: Vec<Expr<'g>>,
+    mu: Vec<Expr<'g>>,
 }
 
 impl<'g> Builder<'g> {
@@ -224,6 +237,7 @@ impl<'g> Builder<'g> {
             u: Vec::new(),
             p,
             pi: Vec::new(),
+            mu: Vec::new(),
         }
     }
 
@@ -243,6 +257,7 @@ impl<'g> Builder<'g> {
                 Arg::U => &self.u,
                 Arg::P => &self.p,
                 Arg::Pi => &self.pi,
+                Arg::Mu => &self.mu,
             };
             for (i, &s) in v.iter().enumerate() {
                 inputs.push((a, i));
@@ -261,6 +276,7 @@ impl<'g> Builder<'g> {
                         Arg::U => "controls",
                         Arg::P => "parameters",
                         Arg::Pi => "dynamics multipliers",
+                        Arg::Mu => "constraint multipliers",
                     })
                     .collect::<Vec<_>>()
                     .join(", "),
@@ -351,6 +367,17 @@ pub fn lower_with<'g>(ocp: &Ocp<'g>, exact_hessian: bool) -> Result<Lowered, Cod
     let u_prev = u_prev_entries(ocp, &v)?;
     let weights_use_u_prev = (u_prev.as_deref())
         .is_some_and(|idx| weights_read_u_prev(ocp, &v, idx, cost.weight_outputs));
+    // Last: the general cost and the constraints' curvature add to the graph only for the
+    // models that have them, so the functions above are those of a model without them.
+    let general_cost = general_cost(ocp, &v, &b)?;
+    let (constraints_hessian, terminal_constraints_hessian) = if exact_hessian {
+        (
+            constraints_hessian(&v, &path.h, Stage::Path)?,
+            constraints_hessian(&v, &terminal.h, Stage::Terminal)?,
+        )
+    } else {
+        (None, None)
+    };
     Ok(Lowered {
         name: ocp.name.clone(),
         shift: ocp.solver.shift,
@@ -373,6 +400,9 @@ pub fn lower_with<'g>(ocp: &Ocp<'g>, exact_hessian: bool) -> Result<Lowered, Cod
         terminal_residual: cost.terminal_residual,
         constant_residual_jacobians: cost.constant_jacobians,
         constant_stage_residual_jacobians: cost.constant_stage_jacobians,
+        general_cost,
+        constraints_hessian,
+        terminal_constraints_hessian,
         constraints: constraints.map(|(f, _)| f),
         terminal_constraints: terminal_constraints.map(|(f, _)| f),
         weights: cost.weights,
@@ -476,6 +506,7 @@ impl<'g> Symbols<'g> {
             u: self.u.to_vec(),
             p: self.p.to_vec(),
             pi: self.pi.clone(),
+            mu: Vec::new(),
         }
     }
 
@@ -487,6 +518,7 @@ impl<'g> Symbols<'g> {
             u: self.u.to_vec(),
             p: self.p.to_vec(),
             pi: Vec::new(),
+            mu: Vec::new(),
         }
     }
 }
