@@ -148,6 +148,39 @@ impl<
         r
     }
 
+    fn constraints(
+        &self,
+        x: &SVector<f64, NX>,
+        u: &SVector<f64, NU>,
+        p: &SVector<f64, NP>,
+        cx: &mut SMatrix<f64, NG, NX>,
+        cu: &mut SMatrix<f64, NG, NU>,
+    ) -> SVector<f64, NG> {
+        let mut r = SVector::zeros();
+        let Some(f) = self.l.constraints.as_ref() else {
+            cx.fill(0.0);
+            cu.fill(0.0);
+            return r;
+        };
+        call!(f, x.as_slice(), u.as_slice(), p.as_slice(), &[], &mut r, ["cx" => cx, "cu" => cu]);
+        r
+    }
+
+    fn constraints_hessian(
+        &self,
+        x: &SVector<f64, NX>,
+        u: &SVector<f64, NU>,
+        p: &SVector<f64, NP>,
+        mu: &SVector<f64, NG>,
+        hxx: &mut SMatrix<f64, NX, NX>,
+        hux: &mut SMatrix<f64, NU, NX>,
+        huu: &mut SMatrix<f64, NU, NU>,
+    ) {
+        let f = self.l.constraints_hessian.as_ref().unwrap();
+        let mut r = SVector::<f64, 0>::zeros();
+        call!(f, x.as_slice(), u.as_slice(), p.as_slice(), mu.as_slice(), &mut r, ["hxx" => hxx, "hux" => hux, "huu" => huu]);
+    }
+
     fn stage_cost(
         &self,
         x: &SVector<f64, NX>,
@@ -527,4 +560,138 @@ fn stage_hessian<const NY: usize, const N: usize>(
         (true, false) => s.s[(j - 2, i)],
         (false, false) => s.r[(i - 2, j - 2)],
     })
+}
+
+// ------------------------------------------------------------------ constraints' curvature
+
+/// The pendulum with its speed limited by a nonlinear row, `om^2 <= 1`, which the
+/// unconstrained solution exceeds (1.89 rad/s mid-horizon).
+fn limited() -> String {
+    PENDULUM.replace(
+        "horizon N",
+        "constraints { speed: -inf <= om^2 <= 1 soft l1 = 100; }\nhorizon N",
+    )
+}
+
+/// The lowered Hessian of `mu' h` against central differences of the lowered Jacobian of
+/// `h`, at random points and multipliers.
+#[test]
+fn the_constraints_hessian_matches_differences_of_their_jacobian() {
+    let l = lowered(&limited(), true);
+    let (jac, hess) = (
+        l.constraints.as_ref().unwrap(),
+        l.constraints_hessian.as_ref().unwrap(),
+    );
+    // Row `[dh/dx, dh/du]` of the one constraint at `z = (th, om, tau)`.
+    let grad = |z: &[f64]| {
+        let mut g = [0.0; 3];
+        run(jac, &z[0..2], &z[2..3], &[2.0, 0.5], &[], |t, v| match t {
+            Target::Mat("cx", 0, j) => g[j] = v,
+            Target::Mat("cu", 0, 0) => g[2] = v,
+            _ => {}
+        });
+        g
+    };
+    let mut seed = 7u64;
+    let mut rnd = || {
+        seed = seed
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+    };
+    for _ in 0..5 {
+        let z = [2.0 * rnd(), 2.0 * rnd(), 2.0 * rnd()];
+        let mu = 3.0 * rnd();
+        let mut h = [[0.0; 3]; 3];
+        run(
+            hess,
+            &z[0..2],
+            &z[2..3],
+            &[2.0, 0.5],
+            &[mu],
+            |t, v| match t {
+                Target::Mat("hxx", i, j) => h[i][j] = v,
+                Target::Mat("hux", 0, j) => {
+                    h[2][j] = v;
+                    h[j][2] = v;
+                }
+                Target::Mat("huu", 0, 0) => h[2][2] = v,
+                other => panic!("{other:?}"),
+            },
+        );
+        let e = 1e-6;
+        for j in 0..3 {
+            let (mut zp, mut zm) = (z, z);
+            zp[j] += e;
+            zm[j] -= e;
+            let (gp, gm) = (grad(&zp), grad(&zm));
+            for i in 0..3 {
+                let fd = mu * (gp[i] - gm[i]) / (2.0 * e);
+                assert!(
+                    (h[i][j] - fd).abs() <= 1e-7,
+                    "({i},{j}) at {z:?}: {} vs {fd}",
+                    h[i][j]
+                );
+            }
+        }
+    }
+}
+
+/// With the speed limit active (a soft row with an exact L1 penalty, which the merit
+/// function weighs), exact-Hessian steps (the dynamics', the cost's and the constraint's
+/// curvature) converge to Gauss-Newton's solution, in no more iterations. (A hard nonlinear
+/// row is not in the merit function: neither Hessian's SQP converges on it in 200
+/// iterations, the runtime's limitation, not this feature's.)
+#[test]
+fn exact_steps_with_an_active_nonlinear_constraint() {
+    type Limited<const E: bool> = Rti<f64, Interp<E, true>, 2, 1, 2, 3, 0, 1, 0, 30>;
+    fn solve<const E: bool>() -> (Box<Limited<E>>, u32) {
+        let l = lowered(&limited(), E);
+        let mut rti: Box<Limited<E>> = Box::new(Rti::new(Interp { l }));
+        let l = &rti.model.l;
+        let p = SVector::<f64, 2>::from_column_slice(&l.p_default);
+        let (mut w, mut wn) = (SMatrix::<f64, 3, 3>::zeros(), SMatrix::<f64, 0, 0>::zeros());
+        let mut r = SVector::<f64, 0>::zeros();
+        call!(&l.weights, &[], &[], p.as_slice(), &[], &mut r, ["w" => w, "wn" => wn]);
+        let (lg, ug) = (SVector::from([l.lg[0]]), SVector::from([l.ug[0]]));
+        let (l1, l2) = (SVector::from([l.l1[0]]), SVector::from([l.l2[0]]));
+        rti.set_weights(&w, &wn).unwrap();
+        rti.set_param_all(&p).unwrap();
+        rti.set_constraint_bounds(&lg, &ug, &SVector::zeros(), &SVector::zeros())
+            .unwrap();
+        rti.set_soft_penalties(&l1, &l2, &SVector::zeros(), &SVector::zeros())
+            .unwrap();
+        sqp_settings(&mut rti.settings);
+        // The QPs with an active row are solved by the interior point to its tolerances
+        // (1e-8): the step test at that level.
+        rti.settings.sqp_tol = 1e-6;
+        let info = rti.solve_sqp(&SVector::<f64, 2>::new(1.0, 0.0));
+        assert_eq!(info.status, RtiStatus::Ok, "exact {E}: {info:?}");
+        (rti, info.sqp_iterations)
+    }
+    let (exact, it_exact) = solve::<true>();
+    let (gn, it_gn) = solve::<false>();
+    let mut worst: f64 = 0.0;
+    let mut top: f64 = 0.0; // the largest row multiplier
+    for k in 0..=30 {
+        let (a, b) = (gn.state(k).unwrap(), exact.state(k).unwrap());
+        worst = worst.max((a - b).amax());
+        if k < 30 {
+            top = top.max(exact.constraint_multipliers(k).unwrap()[0].abs());
+            worst = worst.max((gn.control(k).unwrap() - exact.control(k).unwrap()).amax());
+        }
+    }
+    println!(
+        "speed limit: Gauss-Newton {it_gn}, exact {it_exact} iterations, difference {worst:.1e}"
+    );
+    // The row binds (its multiplier is not zero), so its curvature is in the exact steps.
+    assert!(
+        top > 0.1,
+        "the limit does not bind: multipliers up to {top}"
+    );
+    assert!(worst <= 1e-7, "{worst}");
+    assert!(
+        it_exact <= it_gn,
+        "exact {it_exact} vs Gauss-Newton {it_gn}"
+    );
 }
