@@ -314,8 +314,9 @@ struct BuildArgs {
     /// Leave out the C ABI module and header.
     #[arg(long)]
     no_c_abi: bool,
-    /// Emit the dynamics' Lagrangian Hessian: the full SQP (`solve_sqp`) takes exact-Hessian
-    /// steps (the QP keeps one Hessian per stage; the real-time iteration stays Gauss-Newton).
+    /// Emit the dynamics' (and general constraints') Lagrangian Hessian: the full SQP
+    /// (`solve_sqp`) takes exact-Hessian steps (the QP keeps one Hessian per stage; the
+    /// real-time iteration stays Gauss-Newton, with general costs' Hessians convexified).
     #[arg(long)]
     exact_hessian: bool,
     /// QP iteration limit baked into the solver.
@@ -601,6 +602,13 @@ fn describe(ocp: &Ocp<'_>) -> String {
     }
     if c.input_rate.is_some() {
         terms.push("input rate".into());
+    }
+    for t in &c.general {
+        let at = match t.stage {
+            mpc_dsl::ocp::Stage::Path => "stage",
+            mpc_dsl::ocp::Stage::Terminal => "terminal",
+        };
+        terms.push(format!("{at} {} (general)", t.name));
     }
     let _ = writeln!(o, "  cost        {}", terms.join(", "));
     let _ = writeln!(

@@ -95,7 +95,8 @@ pub struct Options {
     pub staticlib: bool,
     /// The `mpc-runtime` dependency of the generated `Cargo.toml`.
     pub runtime: RuntimeDep,
-    /// Emit the dynamics' part of the Lagrangian Hessian (`Model::dynamics_hessian`) and give
+    /// Emit the dynamics' part of the Lagrangian Hessian (`Model::dynamics_hessian`), and the
+    /// general constraints' (`Model::constraints_hessian`) for a model with any, and give
     /// the QP one Hessian per stage (`NH = N`): the full SQP ([`solve_sqp`]) then takes
     /// exact-Hessian (Newton) steps, which converge quadratically where Gauss-Newton's
     /// converge linearly. The real-time iteration stays Gauss-Newton. Costs code size and,
