@@ -12,6 +12,10 @@
 //! [`Rti::prepare`]): a plan that must violate them (say, an initial state outside a state
 //! constraint) is then still a solution, not an infeasible QP and a fallback. The full-SQP
 //! merit function weights a soft row's violation by its penalties.
+//!
+//! General cost terms ([`Model::GENERAL_COST`]) add their gradients to the QP's and their
+//! Hessians, projected onto the positive semidefinite cone ([`crate::convexify`]), to its
+//! Hessians; the full SQP's exact steps use their exact Hessians.
 
 use nalgebra::{SMatrix, SVector};
 
@@ -54,9 +58,11 @@ pub struct RtiSettings<T> {
     /// solved again to the QP tolerances, and so are the rest of that solve's. Default
     /// [`Real::SQP_LOOSE_QPS`]: on in f64, off in f32.
     pub sqp_loose_qps: bool,
-    /// [`Rti::solve_sqp`] adds the dynamics' curvature `sum_i pi_i d2F_i/d(x, u)2` to the
-    /// Gauss-Newton Hessian of each stage (Newton steps on the Lagrangian, with the last
-    /// QP's multipliers `pi`), where the model provides it ([`Model::EXACT_HESSIAN`]) and
+    /// [`Rti::solve_sqp`] adds the dynamics' curvature `sum_i pi_i d2F_i/d(x, u)2` (and the
+    /// general constraints' `sum_i mu_i d2h_i`, and a general cost's exact Hessian in place
+    /// of its projection) to the Gauss-Newton Hessian of each stage (Newton steps on the
+    /// Lagrangian, with the last QP's multipliers), where the model provides it
+    /// ([`Model::EXACT_HESSIAN`]) and
     /// the QP keeps a Hessian per stage (`NH = N`). An iteration whose QP then fails is
     /// solved again with the Gauss-Newton Hessian; its steps are judged by the watchdog
     /// ([`sqp_watchdog`](Self::sqp_watchdog)), and once that has gone back (or without it), a
@@ -239,7 +245,9 @@ pub enum SetError {
 /// size its QP solver ([`QpSolver`]). `NH` is the number of stage Hessians its QP keeps
 /// ([`OcpQp`]): `N`, or `1` for a model with constant stage residual Jacobians
 /// ([`Model::CONSTANT_STAGE_RESIDUAL_JACOBIANS`]), whose Gauss-Newton Hessian `J'WJ` is the
-/// same at every stage (one weight `W` for all). Other values fail to compile.
+/// same at every stage (one weight `W` for all), and no general cost
+/// ([`Model::GENERAL_COST`], whose Hessians differ from stage to stage). Other values fail
+/// to compile.
 #[derive(Clone, Debug)]
 pub struct Rti<
     T: Real,
@@ -1393,11 +1401,15 @@ impl<
             };
             self.model
                 .constraints_hessian(x, u, p, &mu, &mut c.q, &mut c.s, &mut c.r);
-            let h = self.qp.h_mut(k);
-            h.q += c.q;
-            h.s += c.s;
-            h.r += c.r;
-            added = true;
+            // Linear rows (or the trait's default, zeros) add nothing, and leave the step as
+            // it was without them.
+            if !(is_zero(&c.q) && is_zero(&c.s) && is_zero(&c.r)) {
+                let h = self.qp.h_mut(k);
+                h.q += c.q;
+                h.s += c.s;
+                h.r += c.r;
+                added = true;
+            }
         }
         let mun = self.terminal_constraint_multipliers();
         if !all_finite(&mun) {
@@ -1406,8 +1418,10 @@ impl<
         if mun.iter().any(|&v| v != T::ZERO) {
             self.model
                 .terminal_constraints_hessian(&self.xn, &self.pn, &mun, &mut c.q);
-            self.qp.terminal.q += c.q;
-            added = true;
+            if !is_zero(&c.q) {
+                self.qp.terminal.q += c.q;
+                added = true;
+            }
         }
         Some(added)
     }
@@ -1907,6 +1921,11 @@ fn symmetric_part_into<T: Real, const R: usize>(
         }
     }
     changed
+}
+
+/// Whether every entry of `m` is zero.
+fn is_zero<T: Real, const R: usize, const C: usize>(m: &SMatrix<T, R, C>) -> bool {
+    m.iter().all(|&v| v == T::ZERO)
 }
 
 /// Whether every off-diagonal entry of `m` is zero.
