@@ -269,6 +269,31 @@ mod tests {
         }
     }
 
+    /// In f32: a 2x2 (one state, one control) with eigenvalues 2 and -1 becomes the one with
+    /// 2 and the floor, to f32's precision.
+    #[test]
+    fn projection_in_f32() {
+        // R diag(2, -1) R' with R the rotation by 30 degrees.
+        let (c, s) = (0.75f32.sqrt(), 0.5f32);
+        let m = |d0: f32, d1: f32| {
+            let a = c * c * d0 + s * s * d1;
+            let b = c * s * (d0 - d1);
+            let e = s * s * d0 + c * c * d1;
+            (a, b, e)
+        };
+        let (a, b, e) = m(2.0, -1.0);
+        let mut h = QpHessian::<f32, 1, 1> {
+            q: SMatrix::from_element(a),
+            s: SMatrix::from_element(b),
+            r: SMatrix::from_element(e),
+        };
+        assert!(project_psd(&mut h));
+        let (wa, wb, we) = m(2.0, PROJECTION_FLOOR as f32 * 2.0);
+        assert!((h.q[(0, 0)] - wa).abs() < 1e-5, "{h:?}");
+        assert!((h.s[(0, 0)] - wb).abs() < 1e-5, "{h:?}");
+        assert!((h.r[(0, 0)] - we).abs() < 1e-5, "{h:?}");
+    }
+
     /// A positive semidefinite matrix is left bit for bit.
     #[test]
     fn psd_matrix_is_untouched() {
