@@ -5,8 +5,9 @@
 //! from a C program on its C ABI (`tests/general-cost/main.c`). Both must match IPOPT's
 //! solution of the same problem written independently in CasADi
 //! (`benches/peers/general_cost/pendulum_cost_ipopt.csv`) to 1e-6 over the whole trajectory,
-//! and their cost read-outs (which include the general terms) IPOPT's optimal cost. Needs cc
-//! (the test fails without it).
+//! and their cost read-outs (which include the general terms) IPOPT's optimal cost; and the
+//! model generated in f32 builds for `thumbv7em-none-eabihf`. Needs cc and that target (the
+//! test fails without them).
 #![cfg(unix)]
 
 use std::path::{Path, PathBuf};
@@ -159,4 +160,34 @@ fn a_general_cost_model_solves_from_rust_and_c() {
     let out = run(&mut Command::new(&exe), "the C program");
     let c_iters = check(&String::from_utf8_lossy(&out.stdout), "C");
     assert_eq!(rust_iters, c_iters);
+}
+
+/// The same model generated in f32 builds for a Cortex-M4F (`no_std`, no heap).
+#[test]
+fn a_general_cost_model_builds_in_f32_for_a_bare_metal_target() {
+    let tmp =
+        TempDir(std::env::temp_dir().join(format!("mpcc-general-cost-f32-{}", std::process::id())));
+    let crate_dir = tmp.0.join(NAME);
+    let out_dir = crate_dir.to_str().expect("UTF-8 temporary directory");
+    let runtime = format!("{}/runtime", env!("CARGO_MANIFEST_DIR"));
+    let (code, stdout, stderr) = common::mpcc(&[
+        "build",
+        "tests/data/pendulum_cost.mpc",
+        "-o",
+        out_dir,
+        "--f32",
+        "--exact-hessian",
+        "--runtime-path",
+        &runtime,
+    ]);
+    assert_eq!(code, Some(0), "mpcc build failed:\n{stdout}\n{stderr}");
+    let target = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("general-cost");
+    run(
+        Command::new(env!("CARGO"))
+            .args(["build", "--offline", "--target", "thumbv7em-none-eabihf"])
+            .current_dir(&crate_dir)
+            .env("CARGO_TARGET_DIR", &target)
+            .env_remove("RUSTFLAGS"),
+        "cargo build --target thumbv7em-none-eabihf",
+    );
 }
