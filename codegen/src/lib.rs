@@ -329,6 +329,7 @@ fn header(l: &Lowered, name: &str, stamp: &str, opts: &Options) -> Result<String
     c.insert("nu", &l.nu);
     c.insert("np", &l.np);
     c.insert("ng", &l.ng);
+    c.insert("general_cost", &l.general_cost.is_some());
     c.insert("ngn", &l.ngn);
     c.insert("nbx", &emit::state_bound_rows(l));
     let vals = |v: &[lower::Named]| tera::Value::Array(v.iter().map(var_value).collect());

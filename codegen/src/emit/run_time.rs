@@ -177,9 +177,21 @@ impl Emitter<'_> {
     /// The read-outs: `cost`, `kkt_residual`, the slacks, the multipliers and `trajectory`.
     pub(super) fn read_outs(&self) -> TokenStream {
         let n1 = ul(self.l.n + 1);
+        // The doc of a model without general terms as it was (its crate is unchanged).
+        let cost_doc = if self.l.general_cost.is_some() {
+            quote! {
+                /// The objective at the current trajectory: least-squares cost, the general
+                /// cost terms and the soft rows' slack cost
+                /// ([`Rti::cost`](mpc_runtime::Rti::cost)).
+            }
+        } else {
+            quote! {
+                /// The objective at the current trajectory: least-squares cost plus the soft
+                /// rows' slack cost ([`Rti::cost`](mpc_runtime::Rti::cost)).
+            }
+        };
         quote! {
-            /// The objective at the current trajectory: least-squares cost plus the soft
-            /// rows' slack cost ([`Rti::cost`](mpc_runtime::Rti::cost)).
+            #cost_doc
             pub fn cost(&self) -> Real {
                 self.rti.cost()
             }
