@@ -143,3 +143,24 @@ fn terminal_residual_keeps_its_meaning() {
     assert_eq!(p.ocp.cost.general[2].name, "residual");
     assert_eq!(p.ocp.cost.general[2].stage, Stage::Terminal);
 }
+
+/// The example of `docs/mpc-language.md` ("General cost terms") is the cost block of
+/// `tests/data/pendulum_cost.mpc`, with comments: both parse to the same terms.
+#[test]
+fn the_documented_example_is_the_test_models() {
+    let doc = include_str!("../../docs/mpc-language.md");
+    let block = doc
+        .split("```")
+        .find(|b| b.contains("stage energy"))
+        .expect("the documented example")
+        .trim();
+    let model = include_str!("../../tests/data/pendulum_cost.mpc");
+    let start = model.find("cost {").unwrap();
+    let end = start + model[start..].find('}').unwrap() + 1;
+    let spliced = format!("{}{block}{}", &model[..start], &model[end..]);
+    let g = Graph::new();
+    let a = parse(&g, model, &ParseOptions::default()).unwrap();
+    let b = parse(&g, &spliced, &ParseOptions::default()).unwrap();
+    assert_eq!(a.ocp.cost.general.len(), 4);
+    assert_eq!(a.ocp.cost.general, b.ocp.cost.general);
+}
