@@ -177,6 +177,13 @@ impl Emitter<'_> {
     /// The read-outs: `cost`, `kkt_residual`, the slacks, the multipliers and `trajectory`.
     pub(super) fn read_outs(&self) -> TokenStream {
         let n1 = ul(self.l.n + 1);
+        let (sl, su) = (self.model_rows(quote!(l)), self.model_rows(quote!(u)));
+        let lam = if self.has_soft_bounds() {
+            quote!(|v| take_rows(&v, 0))
+        } else {
+            quote!(Into::into)
+        };
+        let lam_n = self.model_rows(quote!(self.rti.terminal_constraint_multipliers()));
         quote! {
             /// The objective at the current trajectory: least-squares cost plus the soft
             /// rows' slack cost ([`Rti::cost`](mpc_runtime::Rti::cost)).
@@ -195,13 +202,13 @@ impl Emitter<'_> {
             /// Lower and upper slacks `(sl, su)` of stage `k < N`'s general constraints in
             /// the last QP (zero for hard rows).
             pub fn slacks(&self, k: usize) -> Option<([Real; NG], [Real; NG])> {
-                self.rti.slacks(k).map(|(l, u)| (l.into(), u.into()))
+                self.rti.slacks(k).map(|(l, u)| (#sl, #su))
             }
 
             /// Lower and upper slacks of the terminal constraints in the last QP.
             pub fn terminal_slacks(&self) -> ([Real; NGN], [Real; NGN]) {
                 let (l, u) = self.rti.terminal_slacks();
-                (l.into(), u.into())
+                (#sl, #su)
             }
 
             /// The dynamics multipliers `pi_k` (`k < N`, model states) of the last QP.
@@ -225,12 +232,12 @@ impl Emitter<'_> {
             /// (`lam_u - lam_l`; the interior point's, see
             /// [`Rti::constraint_multipliers`](mpc_runtime::Rti::constraint_multipliers)).
             pub fn constraint_multipliers(&self, k: usize) -> Option<[Real; NG]> {
-                self.rti.constraint_multipliers(k).map(Into::into)
+                self.rti.constraint_multipliers(k).map(#lam)
             }
 
             /// The terminal constraints' multipliers in the last QP.
             pub fn terminal_constraint_multipliers(&self) -> [Real; NGN] {
-                self.rti.terminal_constraint_multipliers().into()
+                #lam_n
             }
 
             /// Copies the whole predicted trajectory: model states `x[0..=N]` and controls
