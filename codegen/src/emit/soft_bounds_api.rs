@@ -13,7 +13,11 @@ impl Emitter<'_> {
         if !self.has_soft_bounds() {
             return super::setters::bounds_api();
         }
-        let (u, x, g) = (soft_control_bounds(), soft_state_bounds(), model_row_bounds());
+        let (u, x, g) = (
+            soft_control_bounds(),
+            soft_state_bounds(),
+            model_row_bounds(),
+        );
         quote!(#u #x #g)
     }
 

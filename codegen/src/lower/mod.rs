@@ -356,7 +356,10 @@ pub fn lower_with<'g>(ocp: &Ocp<'g>, exact_hessian: bool) -> Result<Lowered, Cod
         .transpose()?;
     let (mut lbx, mut ubx) = state_bounds(ocp, &v);
     soft_bounds::hard_only(&ocp.state_bounds, &mut lbx, &mut ubx);
-    let (mut lbu, mut ubu) = (ocp.control_bounds.lower.clone(), ocp.control_bounds.upper.clone());
+    let (mut lbu, mut ubu) = (
+        ocp.control_bounds.lower.clone(),
+        ocp.control_bounds.upper.clone(),
+    );
     soft_bounds::hard_only(&ocp.control_bounds, &mut lbu, &mut ubu);
     let (x_guess, u_guess) = guesses(ocp);
     let u_prev = u_prev_entries(ocp, &v)?;

@@ -1,0 +1,228 @@
+//! The soft-bounds test's Rust program (tests/soft_bounds.rs builds it against the crates
+//! `mpcc build` generated from soft_box.mpc, its variant N1, and soft_row.mpc). It prints
+//! one `name value` line per measured outcome; the test compares them with the optima it
+//! computes by hand and between the two formulations. The run-time API's refusals are
+//! checked here (a failed check exits with status 1).
+
+use soft_box::{Real, SetError};
+
+const INF: Real = Real::INFINITY;
+
+/// Every step of `f`'s check, with what failed.
+fn check(ok: bool, what: &str) {
+    if !ok {
+        eprintln!("check failed: {what}");
+        std::process::exit(1);
+    }
+}
+
+/// N = 1: solve from `x0` with the state's (`x`) and the control's (`u`) soft bound and
+/// penalties (`None`: that bound removed); print `x_1` and `u_0`.
+fn one_step(name: &str, x0: Real, x: Option<(Real, Real, Real)>, u: Option<(Real, Real, Real)>) {
+    let mut s = soft_box_n1::Solver::new();
+    let (xb, xl1, xl2) = x.unwrap_or((INF, 1.0, 1.0));
+    let (ub, ul1, ul2) = u.unwrap_or((INF, 1.0, 1.0));
+    check(
+        s.set_state_bounds(&[-INF], &[xb]).is_ok(),
+        "set_state_bounds",
+    );
+    check(
+        s.set_control_bounds(&[-INF], &[ub]).is_ok(),
+        "set_control_bounds",
+    );
+    check(
+        s.set_state_bound_penalties(&[xl1], &[xl2]).is_ok(),
+        "set_state_bound_penalties",
+    );
+    check(
+        s.set_control_bound_penalties(&[ul1], &[ul2]).is_ok(),
+        "set_control_bound_penalties",
+    );
+    check(s.set_x0(&[x0]).is_ok(), "set_x0");
+    let info = s.solve_sqp();
+    check(
+        info.status == soft_box_n1::RtiStatus::Ok,
+        "solve_sqp status",
+    );
+    let x1 = s.state(1).map_or(Real::NAN, |v| v[0]);
+    println!("{name}_x1 {x1:.17e}");
+    println!("{name}_u0 {:.17e}", s.u0()[0]);
+}
+
+/// N = 3, soft bounds against soft rows: ten real-time iterations (the plant is the model)
+/// from `x0`, after `setup` changed both the same way; prints the largest difference of the
+/// applied controls and the last state.
+fn closed_loops(name: &str, x0: Real, l1: Real, l2: Real) {
+    let mut a = soft_box::Solver::new();
+    let mut b = soft_row::Solver::new();
+    check(
+        a.set_state_bound_penalties(&[l1], &[l2]).is_ok(),
+        "box penalties",
+    );
+    let ok = b.set_soft_penalties(&[5.0, l1], &[0.0, l2]).is_ok()
+        && b.set_terminal_soft_penalties(&[l1], &[l2]).is_ok();
+    check(ok, "row penalties");
+    let (mut xa, mut xb, mut diff) = (x0, x0, 0.0 as Real);
+    for _ in 0..10 {
+        a.prepare();
+        b.prepare();
+        check(a.set_x0(&[xa]).is_ok() && b.set_x0(&[xb]).is_ok(), "set_x0");
+        let (ia, ib) = (a.feedback(), b.feedback());
+        check(ia.status == soft_box::RtiStatus::Ok, "box feedback");
+        check(ib.status == soft_row::RtiStatus::Ok, "row feedback");
+        diff = diff.max((a.u0()[0] - b.u0()[0]).abs());
+        for k in 0..=3 {
+            let (sa, sb) = (a.state(k), b.state(k));
+            diff = diff.max((sa.map_or(0.0, |v| v[0]) - sb.map_or(0.0, |v| v[0])).abs());
+        }
+        xa += a.u0()[0];
+        xb += b.u0()[0];
+    }
+    println!("{name}_diff {diff:.17e}");
+    println!("{name}_x {xa:.17e}");
+}
+
+/// The run-time API: constants, bounds read back, refusals that change nothing.
+fn api() {
+    check(
+        soft_box::NG == 0 && soft_box::NGN == 0,
+        "NG, NGN are the model's rows",
+    );
+    check(
+        soft_box::NG_QP == 2 && soft_box::NGN_QP == 1,
+        "NG_QP, NGN_QP",
+    );
+    check(
+        soft_box::SOFT_STATE_BOUNDS == [0] && soft_box::SOFT_CONTROL_BOUNDS == [0],
+        "idx",
+    );
+    let mut s = soft_box::Solver::new();
+    check(
+        s.state_bounds() == ([-INF], [1.0]),
+        "state bounds from the model",
+    );
+    check(
+        s.control_bounds() == ([-INF], [5.0]),
+        "control bounds from the model",
+    );
+    check(
+        s.state_bound_penalties() == ([0.0], [10.0]),
+        "state penalties from the model",
+    );
+    check(
+        s.control_bound_penalties() == ([5.0], [0.0]),
+        "control penalties from the model",
+    );
+    // The runtime's box bounds of soft entries are infinite: the rows hold them.
+    let (lbx, ubx, lbu, ubu) = s.rti().bounds();
+    check(
+        ubx[0] == INF && lbx[0] == -INF && ubu[0] == INF && lbu[0] == -INF,
+        "boxes free",
+    );
+    let refused: [(Real, Real, SetError); 4] = [
+        (Real::NAN, 1.0, SetError::NonFinite),
+        (1.0, INF, SetError::NonFinite),
+        (-1.0, 1.0, SetError::NegativePenalty),
+        (0.0, 0.0, SetError::InvalidSetting),
+    ];
+    for (a, b, e) in refused {
+        check(
+            s.set_state_bound_penalties(&[a], &[b]) == Err(e),
+            "state penalty refused",
+        );
+        check(
+            s.set_control_bound_penalties(&[a], &[b]) == Err(e),
+            "control penalty refused",
+        );
+    }
+    check(
+        s.state_bound_penalties() == ([0.0], [10.0]),
+        "refusals changed nothing",
+    );
+    check(
+        s.control_bound_penalties() == ([5.0], [0.0]),
+        "refusals changed nothing",
+    );
+    check(
+        s.set_state_bound_penalties(&[3.0], &[0.5]).is_ok(),
+        "penalties set",
+    );
+    check(
+        s.state_bound_penalties() == ([3.0], [0.5]),
+        "penalties read back",
+    );
+    let (l1, l2, l1n, l2n) = s.rti().soft_penalties();
+    check(
+        l1[1] == 3.0 && l2[1] == 0.5 && l1n[0] == 3.0 && l2n[0] == 0.5,
+        "rows follow",
+    );
+    check(l1[0] == 5.0, "the control's row keeps its penalty");
+    // Bounds of soft entries: refused ones change nothing, accepted ones read back.
+    check(
+        s.set_state_bounds(&[2.0], &[1.0]) == Err(SetError::CrossedBounds),
+        "crossed",
+    );
+    check(
+        s.set_state_bounds(&[Real::NAN], &[1.0]) == Err(SetError::NonFinite),
+        "NaN",
+    );
+    check(
+        s.set_control_bounds(&[INF], &[INF]) == Err(SetError::NonFinite),
+        "lower +inf",
+    );
+    check(
+        s.state_bounds() == ([-INF], [1.0]),
+        "refused bounds changed nothing",
+    );
+    check(
+        s.control_bounds() == ([-INF], [5.0]),
+        "refused bounds changed nothing",
+    );
+    check(
+        s.set_state_bounds(&[-2.0], &[0.5]).is_ok(),
+        "state bounds set",
+    );
+    check(
+        s.state_bounds() == ([-2.0], [0.5]),
+        "state bounds read back",
+    );
+    let (lg, ug, lgn, ugn) = s.rti().constraint_bounds();
+    check(
+        lg[1] == -2.0 && ug[1] == 0.5 && lgn[0] == -2.0 && ugn[0] == 0.5,
+        "rows hold them",
+    );
+    check(
+        lg[0] == -INF && ug[0] == 5.0,
+        "the control's row keeps its bounds",
+    );
+    check(
+        s.set_control_bounds(&[-1.0], &[1.5]).is_ok(),
+        "control bounds set",
+    );
+    check(
+        s.control_bounds() == ([-1.0], [1.5]),
+        "control bounds read back",
+    );
+    check(
+        s.constraint_bounds() == ([], []),
+        "the model's own rows: none",
+    );
+    println!("api ok");
+}
+
+fn main() {
+    // x_1 <= 1 soft: L2 only, L1 above and below the bound's multiplier 3, both.
+    one_step("x_l2", 0.0, Some((1.0, 0.0, 10.0)), None);
+    one_step("x_l1_above", 0.0, Some((1.0, 5.0, 0.0)), None);
+    one_step("x_l1_below", 0.0, Some((1.0, 2.0, 0.0)), None);
+    one_step("x_l1_l2", 0.0, Some((1.0, 2.0, 10.0)), None);
+    // The measured state outside the bound: its stage-0 row is a constant.
+    one_step("x_l2_outside", 1.5, Some((1.0, 0.0, 10.0)), None);
+    // u_0 <= 1 soft.
+    one_step("u_l2", 0.0, None, Some((1.0, 0.0, 10.0)));
+    one_step("u_l1_above", 0.0, None, Some((1.0, 5.0, 0.0)));
+    one_step("u_l1_below", 0.0, None, Some((1.0, 2.0, 0.0)));
+    closed_loops("loop_l2", 0.0, 0.0, 10.0);
+    closed_loops("loop_l1", 1.8, 5.0, 1.0);
+    api();
+}

@@ -1,0 +1,190 @@
+//! Soft state and control bounds end to end: `mpcc build` generates the solvers of
+//! `tests/soft-bounds/soft_box.mpc` (horizons 3 and 1) and of `soft_row.mpc` (the same problem
+//! with the soft bounds written as general soft rows) into a temporary directory; a Rust
+//! program (`tests/soft-bounds/main.rs`) solves with them and a C program (`main.c`) uses the
+//! C ABI. The outcomes are compared with the optima computed here by hand:
+//!
+//! With N = 1, `x_1 = x_0 + u_0` and the cost `1/2 r u_0^2 + 1/2 p (x_1 - xr)^2` (r = 1,
+//! p = 4, xr = 2), the soft bound `x_1 <= b` with penalties `l1 s + 1/2 l2 s^2` on the
+//! violation `s`: where the optimum violates it, `x_1 = (r x_0 + p xr + l2 b - l1) /
+//! (r + p + l2)`; the hard bound's multiplier is `lambda = r (x_0 - b) + p (xr - b)`, and
+//! with `l1 >= lambda` the bound holds exactly. The control's bound `u_0 <= b` likewise, with
+//! `u_0 = (p (xr - x_0) + l2 b - l1) / (r + p + l2)`.
+//! Needs cc (the test fails without it).
+#![cfg(unix)]
+
+use std::collections::HashMap;
+use std::path::Path;
+use std::process::Command;
+
+mod common;
+
+use common::{TempDir, run};
+
+const R: f64 = 1.0;
+const P: f64 = 4.0;
+const XR: f64 = 2.0;
+
+/// The soft optimum of `x_1 <= b` from `x0` (N = 1), or `b` where `l1` exceeds the
+/// multiplier.
+fn x1_soft(x0: f64, b: f64, l1: f64, l2: f64) -> f64 {
+    let free = (R * x0 + P * XR) / (R + P);
+    if free <= b {
+        return free;
+    }
+    let lambda = R * (x0 - b) + P * (XR - b);
+    if l2 == 0.0 && l1 >= lambda {
+        return b;
+    }
+    ((R * x0 + P * XR + l2 * b - l1) / (R + P + l2)).max(b)
+}
+
+/// The soft optimum of `u_0 <= b` from `x_0 = 0` (N = 1).
+fn u0_soft(b: f64, l1: f64, l2: f64) -> f64 {
+    let free = P * XR / (R + P);
+    let lambda = R * b + P * (b - XR);
+    if l2 == 0.0 && l1 >= -lambda {
+        return b;
+    }
+    ((P * XR + l2 * b - l1) / (R + P + l2)).max(b).min(free)
+}
+
+/// Generates the crate of `model` (with `extra` options) into `dir/name`.
+fn generate(dir: &Path, model: &str, name: &str, extra: &[&str]) {
+    let out = dir.join(name);
+    let runtime = format!("{}/runtime", env!("CARGO_MANIFEST_DIR"));
+    let mut args = vec!["build", model, "-o", out.to_str().unwrap(), "--name", name];
+    args.extend_from_slice(&["--runtime-path", &runtime]);
+    args.extend_from_slice(extra);
+    let (code, stdout, stderr) = common::mpcc(&args);
+    assert_eq!(code, Some(0), "mpcc build {model}:\n{stdout}\n{stderr}");
+}
+
+/// Builds and runs the Rust program against the three crates: its `name value` lines.
+fn rust_program(dir: &Path, target: &Path) -> HashMap<String, f64> {
+    let prog = dir.join("prog");
+    std::fs::create_dir_all(prog.join("src")).unwrap();
+    let manifest = "[package]\nname = \"soft_bounds_prog\"\nversion = \"0.1.0\"\nedition = \"2024\"\n\
+        publish = false\n\n[workspace]\n\n[dependencies]\nsoft_box = { path = \"../soft_box\" }\n\
+        soft_box_n1 = { path = \"../soft_box_n1\" }\nsoft_row = { path = \"../soft_row\" }\n";
+    std::fs::write(prog.join("Cargo.toml"), manifest).unwrap();
+    let main = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/soft-bounds/main.rs");
+    std::fs::copy(main, prog.join("src/main.rs")).unwrap();
+    let out = run(
+        Command::new(env!("CARGO"))
+            .args(["run", "--quiet", "--release"])
+            .current_dir(&prog)
+            .env("CARGO_TARGET_DIR", target)
+            .env("CARGO_NET_OFFLINE", "true"),
+        "the Rust program",
+    );
+    let text = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(text.contains("api ok"), "{text}");
+    (text.lines())
+        .filter_map(|l| l.split_once(' '))
+        .filter_map(|(k, v)| Some((k.to_string(), v.parse().ok()?)))
+        .collect()
+}
+
+#[test]
+fn soft_bounds_match_their_closed_form_optima_and_the_soft_rows() {
+    let tmp = TempDir(std::env::temp_dir().join(format!("mpcc-soft-{}", std::process::id())));
+    let dir = &tmp.0;
+    generate(
+        dir,
+        "tests/soft-bounds/soft_box.mpc",
+        "soft_box",
+        &["--staticlib"],
+    );
+    generate(
+        dir,
+        "tests/soft-bounds/soft_box.mpc",
+        "soft_box_n1",
+        &["--variant", "N1"],
+    );
+    generate(dir, "tests/soft-bounds/soft_row.mpc", "soft_row", &[]);
+    // Kept between runs: the runtime's build is reused.
+    let target = Path::new(env!("CARGO_TARGET_TMPDIR")).join("soft-bounds");
+    let v = rust_program(dir, &target);
+    let get = |k: &str| *v.get(k).unwrap_or_else(|| panic!("no {k} in {v:?}"));
+    let cases = [
+        ("x_l2", x1_soft(0.0, 1.0, 0.0, 10.0), 1.2),
+        ("x_l1_above", x1_soft(0.0, 1.0, 5.0, 0.0), 1.0),
+        ("x_l1_below", x1_soft(0.0, 1.0, 2.0, 0.0), 1.2),
+        ("x_l1_l2", x1_soft(0.0, 1.0, 2.0, 10.0), 16.0 / 15.0),
+        ("x_l2_outside", x1_soft(1.5, 1.0, 0.0, 10.0), 1.3),
+    ];
+    for (name, want, by_hand) in cases {
+        assert!(
+            (want - by_hand).abs() < 1e-12,
+            "{name}: {want} vs {by_hand}"
+        );
+        let got = get(&format!("{name}_x1"));
+        assert!(
+            (got - want).abs() < 1e-6,
+            "{name}: x_1 = {got}, closed form {want}"
+        );
+    }
+    let cases = [
+        ("u_l2", u0_soft(1.0, 0.0, 10.0), 1.2),
+        ("u_l1_above", u0_soft(1.0, 5.0, 0.0), 1.0),
+        ("u_l1_below", u0_soft(1.0, 2.0, 0.0), 1.2),
+    ];
+    for (name, want, by_hand) in cases {
+        assert!(
+            (want - by_hand).abs() < 1e-12,
+            "{name}: {want} vs {by_hand}"
+        );
+        let got = get(&format!("{name}_u0"));
+        assert!(
+            (got - want).abs() < 1e-6,
+            "{name}: u_0 = {got}, closed form {want}"
+        );
+    }
+    // The same QP as the explicit soft rows: the same closed loops.
+    for name in ["loop_l2", "loop_l1"] {
+        let d = get(&format!("{name}_diff"));
+        assert!(d <= 1e-9, "{name}: soft bounds and soft rows differ by {d}");
+    }
+    // L1 above the multiplier: from 1.8, outside the bound 1, the state is brought inside
+    // and stays there (the terminal cost pulls it toward 2; its plans approach 1 from below).
+    let x = get("loop_l1_x");
+    assert!(x <= 1.0 + 1e-6 && x > 0.99, "loop_l1: x = {x}");
+
+    // The C ABI: penalties set, read back and refused; the bound then holds exactly.
+    let exe = dir.join("soft_c");
+    let crate_dir = dir.join("soft_box");
+    run(
+        Command::new(env!("CARGO"))
+            .args(["build", "--quiet", "--release"])
+            .current_dir(&crate_dir)
+            .env("CARGO_TARGET_DIR", &target)
+            .env("CARGO_NET_OFFLINE", "true"),
+        "the static library",
+    );
+    let lib = target.join("release/libsoft_box.a");
+    let main_c = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/soft-bounds/main.c");
+    run(
+        Command::new("cc")
+            .args([
+                "-std=c11",
+                "-Wall",
+                "-Wextra",
+                "-Werror",
+                "-pedantic",
+                "-O2",
+            ])
+            .arg(&main_c)
+            .arg(format!("-I{}", crate_dir.join("include").display()))
+            .arg(&lib)
+            .args(["-lpthread", "-ldl", "-lm", "-o"])
+            .arg(&exe),
+        "cc",
+    );
+    let out = run(&mut Command::new(&exe), "the C program");
+    let text = String::from_utf8_lossy(&out.stdout).into_owned();
+    let x3: f64 = (text.strip_prefix("x3 ").and_then(|t| t.trim().parse().ok()))
+        .unwrap_or_else(|| panic!("{text}"));
+    // The multiplier of x_3 <= 0.5 is 35/6 < 10: the bound holds.
+    assert!((x3 - 0.5).abs() < 1e-6, "C: x_3 = {x3}");
+}
