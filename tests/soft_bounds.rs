@@ -60,13 +60,29 @@ fn generate(dir: &Path, model: &str, name: &str, extra: &[&str]) {
     assert_eq!(code, Some(0), "mpcc build {model}:\n{stdout}\n{stderr}");
 }
 
+/// `models/cartpole.mpc` with its rail `|s| <= 1.5` (which the closed loop never reaches:
+/// its cart goes to 0.816 m, `docs/examples.md`) made the soft bound `|s| <= 0.5`, written
+/// into `dir`.
+fn cartpole_with_a_soft_rail(dir: &Path) -> std::path::PathBuf {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let text = std::fs::read_to_string(root.join("models/cartpole.mpc")).unwrap();
+    let hard = "    s in [-1.5, 1.5];";
+    assert!(text.contains(hard), "models/cartpole.mpc changed its rail");
+    let soft = text.replace(hard, "    s in [-0.5, 0.5] soft l1 = 1000;");
+    let path = dir.join("cartpole_soft.mpc");
+    std::fs::create_dir_all(dir).unwrap();
+    std::fs::write(&path, soft).unwrap();
+    path
+}
+
 /// Builds and runs the Rust program against the three crates: its `name value` lines.
 fn rust_program(dir: &Path, target: &Path) -> HashMap<String, f64> {
     let prog = dir.join("prog");
     std::fs::create_dir_all(prog.join("src")).unwrap();
     let manifest = "[package]\nname = \"soft_bounds_prog\"\nversion = \"0.1.0\"\nedition = \"2024\"\n\
         publish = false\n\n[workspace]\n\n[dependencies]\nsoft_box = { path = \"../soft_box\" }\n\
-        soft_box_n1 = { path = \"../soft_box_n1\" }\nsoft_row = { path = \"../soft_row\" }\n";
+        soft_box_n1 = { path = \"../soft_box_n1\" }\nsoft_row = { path = \"../soft_row\" }\n\
+        cartpole_soft = { path = \"../cartpole_soft\" }\n";
     std::fs::write(prog.join("Cargo.toml"), manifest).unwrap();
     let main = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/soft-bounds/main.rs");
     std::fs::copy(main, prog.join("src/main.rs")).unwrap();
@@ -103,6 +119,8 @@ fn soft_bounds_match_their_closed_form_optima_and_the_soft_rows() {
         &["--variant", "N1"],
     );
     generate(dir, "tests/soft-bounds/soft_row.mpc", "soft_row", &[]);
+    let cartpole = cartpole_with_a_soft_rail(dir);
+    generate(dir, cartpole.to_str().unwrap(), "cartpole_soft", &[]);
     // Kept between runs: the runtime's build is reused.
     let target = Path::new(env!("CARGO_TARGET_TMPDIR")).join("soft-bounds");
     let v = rust_program(dir, &target);
@@ -150,6 +168,40 @@ fn soft_bounds_match_their_closed_form_optima_and_the_soft_rows() {
     // and stays there (the terminal cost pulls it toward 2; its plans approach 1 from below).
     let x = get("loop_l1_x");
     assert!(x <= 1.0 + 1e-6 && x > 0.99, "loop_l1: x = {x}");
+
+    // The cart-pole with its rail a soft bound |s| <= 0.5: the bound's multiplier peaks at
+    // about 135 during the swing-up, so L1 = 100 is below it and the cart passes the rail;
+    // L1 = 1000 is above it and the rail holds (to the QP's tolerance), the swing-up intact.
+    for (k, val) in v.iter().filter(|(k, _)| k.starts_with("cart_")) {
+        println!("{k} {val}");
+    }
+    let m = get("cart_l1_1000_multiplier");
+    assert!(m > 100.0 && m < 1000.0, "the rail's multiplier: {m}");
+    assert!(
+        get("cart_l1_100_multiplier") <= 100.0 + 1e-6,
+        "L1 caps the multiplier"
+    );
+    assert!(
+        get("cart_l1_100_s_max") > 0.5 + 1e-3,
+        "L1 = 100 below the multiplier"
+    );
+    assert!(get("cart_l1_100_plan_max") > 0.5 + 1e-3);
+    assert!(get("cart_l1_1000_s_max") <= 0.5 + 1e-6, "the rail holds");
+    assert!(
+        get("cart_l1_1000_plan_max") <= 0.5 + 1e-6,
+        "the plans keep it"
+    );
+    for name in ["cart_l1_100", "cart_l1_1000"] {
+        assert_eq!(get(&format!("{name}_not_ok")), 0.0, "{name}: a step not Ok");
+        assert!(
+            get(&format!("{name}_upright_since")) <= 100.0,
+            "{name}: no swing-up"
+        );
+        assert!(
+            get(&format!("{name}_rest")) < 1e-3,
+            "{name}: not at rest upright"
+        );
+    }
 
     // The C ABI: penalties set, read back and refused; the bound then holds exactly.
     let exe = dir.join("soft_c");

@@ -1,5 +1,6 @@
 //! The soft-bounds test's Rust program (tests/soft_bounds.rs builds it against the crates
-//! `mpcc build` generated from soft_box.mpc, its variant N1, and soft_row.mpc). It prints
+//! `mpcc build` generated from soft_box.mpc, its variant N1, soft_row.mpc, and
+//! models/cartpole.mpc with its rail a soft bound `|s| <= 0.5`). It prints
 //! one `name value` line per measured outcome; the test compares them with the optima it
 //! computes by hand and between the two formulations. The run-time API's refusals are
 //! checked here (a failed check exits with status 1).
@@ -210,6 +211,77 @@ fn api() {
     println!("api ok");
 }
 
+/// `models/cartpole.mpc`'s ODE (as `tests/examples.rs`'s plant), `x = [s, theta, ds, dtheta]`.
+fn cartpole_ode(x: &[f64; 4], force: f64) -> [f64; 4] {
+    let (g, mc, mp, l) = (9.81, 0.5, 0.2, 0.5);
+    let (st, ct) = x[1].sin_cos();
+    let d = mc + mp * st * st;
+    let dds = (force + mp * st * (l * x[3] * x[3] + g * ct)) / d;
+    let ddth = (-force * ct - mp * l * x[3] * x[3] * st * ct - (mc + mp) * g * st) / (l * d);
+    [x[2], x[3], dds, ddth]
+}
+
+/// Classical RK4 over `dt` in 10 substeps, the control held (the plant).
+fn plant(x: &[f64; 4], force: f64, dt: f64) -> [f64; 4] {
+    let h = dt / 10.0;
+    let add = |x: &[f64; 4], k: &[f64; 4], c: f64| std::array::from_fn(|i| x[i] + c * k[i]);
+    let mut x = *x;
+    for _ in 0..10 {
+        let k1 = cartpole_ode(&x, force);
+        let k2 = cartpole_ode(&add(&x, &k1, h / 2.0), force);
+        let k3 = cartpole_ode(&add(&x, &k2, h / 2.0), force);
+        let k4 = cartpole_ode(&add(&x, &k3, h), force);
+        x = std::array::from_fn(|i| x[i] + h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]));
+    }
+    x
+}
+
+/// The cart-pole swing-up (300 real-time iterations from hanging at rest, default settings)
+/// with the rail a soft bound `|s| <= 0.5` of penalty `l1`: prints the steps not `Ok`, the
+/// first step from which the pole stays within 0.05 rad of upright, the largest |s| of the
+/// cart and of the plans, the largest multiplier of the bound's rows (stages 1..N-1), and
+/// the largest distance of the last state from upright at rest.
+fn cartpole(name: &str, l1: f64) {
+    let mut s = Box::new(cartpole_soft::Solver::new());
+    check(
+        s.set_state_bound_penalties(&[l1], &[0.0]).is_ok(),
+        "cart-pole penalty",
+    );
+    let (mut x, mut not_ok, mut since) = ([0.0; 4], 0, None);
+    let (mut s_max, mut plan_max, mut mult) = (0.0_f64, 0.0_f64, 0.0_f64);
+    for step in 0..300 {
+        s.prepare();
+        check(s.set_x0(&x).is_ok(), "set_x0");
+        not_ok += usize::from(s.feedback().status != cartpole_soft::RtiStatus::Ok);
+        for k in 1..=cartpole_soft::N {
+            plan_max = plan_max.max(s.state(k).map_or(0.0, |v| v[0].abs()));
+            let m = s
+                .rti()
+                .constraint_multipliers(k)
+                .map_or(0.0, |m| m[0].abs());
+            mult = mult.max(m);
+        }
+        x = plant(&x, s.u0()[0], cartpole_soft::DT);
+        s_max = s_max.max(x[0].abs());
+        let off = x[1].rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI;
+        since = if off.abs() < 0.05 {
+            since.or(Some(step + 1))
+        } else {
+            None
+        };
+    }
+    let rest = (x[0].abs())
+        .max(x[2].abs())
+        .max(x[3].abs())
+        .max((x[1] - std::f64::consts::PI).abs());
+    println!("{name}_not_ok {not_ok}");
+    println!("{name}_upright_since {}", since.unwrap_or(usize::MAX));
+    println!("{name}_s_max {s_max:.17e}");
+    println!("{name}_plan_max {plan_max:.17e}");
+    println!("{name}_multiplier {mult:.17e}");
+    println!("{name}_rest {rest:.17e}");
+}
+
 fn main() {
     // x_1 <= 1 soft: L2 only, L1 above and below the bound's multiplier 3, both.
     one_step("x_l2", 0.0, Some((1.0, 0.0, 10.0)), None);
@@ -225,4 +297,6 @@ fn main() {
     closed_loops("loop_l2", 0.0, 0.0, 10.0);
     closed_loops("loop_l1", 1.8, 5.0, 1.0);
     api();
+    cartpole("cart_l1_100", 100.0);
+    cartpole("cart_l1_1000", 1000.0);
 }
