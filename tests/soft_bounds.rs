@@ -169,6 +169,32 @@ fn soft_bounds_match_their_closed_form_optima_and_the_soft_rows() {
     let x = get("loop_l1_x");
     assert!(x <= 1.0 + 1e-6 && x > 0.99, "loop_l1: x = {x}");
 
+    // IPOPT on the same problem with explicit slacks (benches/peers/soft_bounds_casadi.py).
+    let csv =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("benches/peers/soft_bounds/soft_box_ipopt.csv");
+    let text = std::fs::read_to_string(csv).unwrap();
+    let mut compared = 0;
+    for line in text
+        .lines()
+        .filter(|l| !l.starts_with('#') && !l.starts_with("case"))
+    {
+        let f: Vec<&str> = line.split(',').collect();
+        let (case, k) = (f[0], f[1]);
+        for (what, value) in [("x", f[2]), ("u", f[3])]
+            .into_iter()
+            .filter(|(_, v)| !v.is_empty())
+        {
+            let want: f64 = value.parse().unwrap();
+            let got = get(&format!("ipopt_{case}_{what}{k}"));
+            assert!(
+                (got - want).abs() < 1e-6,
+                "{case}: {what}_{k} = {got}, IPOPT {want}"
+            );
+            compared += 1;
+        }
+    }
+    assert_eq!(compared, 4 * 7, "{text}");
+
     // The cart-pole with its rail a soft bound |s| <= 0.5: the bound's multiplier peaks at
     // about 135 during the swing-up, so L1 = 100 is below it and the cart passes the rail;
     // L1 = 1000 is above it and the rail holds (to the QP's tolerance), the swing-up intact.

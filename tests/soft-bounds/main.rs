@@ -83,6 +83,38 @@ fn closed_loops(name: &str, x0: Real, l1: Real, l2: Real) {
     println!("{name}_x {xa:.17e}");
 }
 
+/// N = 3, `solve_sqp` from `x0` with the state bound's penalties `l1`, `l2`: prints the
+/// optimal `x_k`, `u_k` (compared with IPOPT's in the test).
+fn converged(name: &str, x0: Real, l1: Real, l2: Real) {
+    let mut s = soft_box::Solver::new();
+    check(
+        s.set_state_bound_penalties(&[l1], &[l2]).is_ok(),
+        "penalties",
+    );
+    check(s.set_x0(&[x0]).is_ok(), "set_x0");
+    // Tight, as IPOPT's: the L1 case is degenerate (x_2 on its bound with a zero
+    // multiplier), where the default tolerances leave 1e-5 in u.
+    let t = s.settings_mut();
+    (t.qp.tol_stat, t.qp.tol_eq, t.qp.tol_ineq, t.qp.tol_comp) = (1e-11, 1e-11, 1e-11, 1e-11);
+    let info = s.solve_sqp();
+    if info.status != soft_box::RtiStatus::Ok {
+        eprintln!("{name}: {info:?}");
+    }
+    check(info.status == soft_box::RtiStatus::Ok, "solve_sqp");
+    for k in 0..=soft_box::N {
+        println!(
+            "{name}_x{k} {:.17e}",
+            s.state(k).map_or(Real::NAN, |v| v[0])
+        );
+    }
+    for k in 0..soft_box::N {
+        println!(
+            "{name}_u{k} {:.17e}",
+            s.control(k).map_or(Real::NAN, |v| v[0])
+        );
+    }
+}
+
 /// The run-time API: constants, bounds read back, refusals that change nothing.
 fn api() {
     check(
@@ -296,6 +328,10 @@ fn main() {
     one_step("u_l1_below", 0.0, None, Some((1.0, 2.0, 0.0)));
     closed_loops("loop_l2", 0.0, 0.0, 10.0);
     closed_loops("loop_l1", 1.8, 5.0, 1.0);
+    converged("ipopt_l2_inside", 0.0, 0.0, 10.0);
+    converged("ipopt_l2_outside", 1.8, 0.0, 10.0);
+    converged("ipopt_l1_l2_outside", 1.8, 5.0, 1.0);
+    converged("ipopt_l1_below", 0.0, 2.0, 0.0);
     api();
     cartpole("cart_l1_100", 100.0);
     cartpole("cart_l1_1000", 1000.0);
