@@ -268,13 +268,14 @@ fn plant(x: &[f64; 4], force: f64, dt: f64) -> [f64; 4] {
     x
 }
 
-/// The cart-pole swing-up (300 real-time iterations from hanging at rest, default settings)
-/// with the rail a soft bound `|s| <= 0.5` of penalty `l1`: prints the steps not `Ok`, the
+/// The cart-pole swing-up (300 real-time iterations from hanging at rest, default settings
+/// but for the `shift`) with the rail a soft bound `|s| <= 0.5` of penalty `l1`: prints the steps not `Ok`, the
 /// first step from which the pole stays within 0.05 rad of upright, the largest |s| of the
 /// cart and of the plans, the largest multiplier of the bound's rows (stages 1..N-1), and
 /// the largest distance of the last state from upright at rest.
-fn cartpole(name: &str, l1: f64) {
+fn cartpole(name: &str, l1: f64, shift: bool) {
     let mut s = Box::new(cartpole_soft::Solver::new());
+    s.settings_mut().shift = shift;
     check(
         s.set_state_bound_penalties(&[l1], &[0.0]).is_ok(),
         "cart-pole penalty",
@@ -333,6 +334,8 @@ fn main() {
     converged("ipopt_l1_l2_outside", 1.8, 5.0, 1.0);
     converged("ipopt_l1_below", 0.0, 2.0, 0.0);
     api();
-    cartpole("cart_l1_100", 100.0);
-    cartpole("cart_l1_1000", 1000.0);
+    cartpole("cart_l1_100", 100.0, true);
+    cartpole("cart_l1_1000", 1000.0, true);
+    cartpole("cart_noshift_l1_1000", 1000.0, false);
+    cartpole("cart_noshift_l1_10000", 10000.0, false);
 }
