@@ -18,7 +18,7 @@ fn check(ok: bool, what: &str) {
 }
 
 /// N = 1: solve from `x0` with the state's (`x`) and the control's (`u`) soft bound and
-/// penalties (`None`: that bound removed); print `x_1` and `u_0`.
+/// penalties (`None`: that bound removed); print `x_1`, `u_0` and the bound's multiplier.
 fn one_step(name: &str, x0: Real, x: Option<(Real, Real, Real)>, u: Option<(Real, Real, Real)>) {
     let mut s = soft_box_n1::Solver::new();
     let (xb, xl1, xl2) = x.unwrap_or((INF, 1.0, 1.0));
@@ -48,6 +48,12 @@ fn one_step(name: &str, x0: Real, x: Option<(Real, Real, Real)>, u: Option<(Real
     let x1 = s.state(1).map_or(Real::NAN, |v| v[0]);
     println!("{name}_x1 {x1:.17e}");
     println!("{name}_u0 {:.17e}", s.u0()[0]);
+    // The bound's multiplier: the soft row's, through the bounds' read-outs.
+    let mult = match (x, u) {
+        (Some(_), _) => s.state_bound_multipliers(1).map_or(Real::NAN, |m| m[0]),
+        _ => s.control_bound_multipliers(0).map_or(Real::NAN, |m| m[0]),
+    };
+    println!("{name}_mult {mult:.17e}");
 }
 
 /// N = 3, soft bounds against soft rows: ten real-time iterations (the plant is the model)

@@ -174,6 +174,27 @@ impl Emitter<'_> {
         }
     }
 
+    /// `control_bound_multipliers` and `state_bound_multipliers` (with soft bounds,
+    /// `soft_bounds_api::soft_bound_multipliers`).
+    fn bound_multipliers(&self) -> TokenStream {
+        if self.has_soft_bounds() {
+            return super::soft_bounds_api::soft_bound_multipliers();
+        }
+        quote! {
+            /// The control bounds' multipliers of stage `k < N` in the last QP
+            /// (`mu_u - mu_l`: positive on an upper bound, negative on a lower one).
+            pub fn control_bound_multipliers(&self, k: usize) -> Option<[Real; NU]> {
+                self.rti.control_bound_multipliers(k).map(Into::into)
+            }
+
+            /// The model-state bounds' multipliers of stage `1 <= k <= N` in the last QP
+            /// (signs as [`control_bound_multipliers`](Self::control_bound_multipliers)).
+            pub fn state_bound_multipliers(&self, k: usize) -> Option<[Real; NX_MODEL]> {
+                self.rti.state_bound_multipliers(k).map(|v| core::array::from_fn(|i| v[i]))
+            }
+        }
+    }
+
     /// The read-outs: `cost`, `kkt_residual`, the slacks, the multipliers and `trajectory`.
     pub(super) fn read_outs(&self) -> TokenStream {
         let n1 = ul(self.l.n + 1);
@@ -184,6 +205,7 @@ impl Emitter<'_> {
             quote!(Into::into)
         };
         let lam_n = self.model_rows(quote!(self.rti.terminal_constraint_multipliers()));
+        let bound_multipliers = self.bound_multipliers();
         quote! {
             /// The objective at the current trajectory: least-squares cost plus the soft
             /// rows' slack cost ([`Rti::cost`](mpc_runtime::Rti::cost)).
@@ -216,17 +238,7 @@ impl Emitter<'_> {
                 self.rti.dynamics_multipliers(k).map(|v| core::array::from_fn(|i| v[i]))
             }
 
-            /// The control bounds' multipliers of stage `k < N` in the last QP
-            /// (`mu_u - mu_l`: positive on an upper bound, negative on a lower one).
-            pub fn control_bound_multipliers(&self, k: usize) -> Option<[Real; NU]> {
-                self.rti.control_bound_multipliers(k).map(Into::into)
-            }
-
-            /// The model-state bounds' multipliers of stage `1 <= k <= N` in the last QP
-            /// (signs as [`control_bound_multipliers`](Self::control_bound_multipliers)).
-            pub fn state_bound_multipliers(&self, k: usize) -> Option<[Real; NX_MODEL]> {
-                self.rti.state_bound_multipliers(k).map(|v| core::array::from_fn(|i| v[i]))
-            }
+            #bound_multipliers
 
             /// The general constraints' multipliers of stage `k < N` in the last QP
             /// (`lam_u - lam_l`; the interior point's, see

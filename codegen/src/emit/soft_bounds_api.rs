@@ -32,6 +32,36 @@ impl Emitter<'_> {
     }
 }
 
+/// `control_bound_multipliers` and `state_bound_multipliers` with soft entries: a soft
+/// entry's is its row's (`lam_u - lam_l`, the sign convention of the box bounds'), the box
+/// bound's being zero.
+pub(super) fn soft_bound_multipliers() -> TokenStream {
+    quote! {
+        /// The control bounds' multipliers of stage `k < N` in the last QP
+        /// (`mu_u - mu_l`: positive on an upper bound, negative on a lower one; a soft
+        /// bound's is its row's, `l1 + l2 s` where it is violated by `s`).
+        pub fn control_bound_multipliers(&self, k: usize) -> Option<[Real; NU]> {
+            let rows = self.rti.constraint_multipliers(k)?;
+            let v = self.rti.control_bound_multipliers(k)?;
+            Some(with_soft_rows(&v, &rows, NG, &SOFT_CONTROL_BOUNDS))
+        }
+
+        /// The model-state bounds' multipliers of stage `1 <= k <= N` in the last QP
+        /// (signs as [`control_bound_multipliers`](Self::control_bound_multipliers); a soft
+        /// bound's is its row's).
+        pub fn state_bound_multipliers(&self, k: usize) -> Option<[Real; NX_MODEL]> {
+            let v = self.rti.state_bound_multipliers(k)?;
+            Some(if k < N {
+                let rows = self.rti.constraint_multipliers(k)?;
+                with_soft_rows(&v, &rows, NG + NSBU, &SOFT_STATE_BOUNDS)
+            } else {
+                let rows = self.rti.terminal_constraint_multipliers();
+                with_soft_rows(&v, &rows, NGN, &SOFT_STATE_BOUNDS)
+            })
+        }
+    }
+}
+
 /// `set_control_bounds` and `control_bounds` with soft entries: the soft entries' bounds
 /// live in their rows (`NG..NG + NSBU`). The rows are set first and put back if the box
 /// bounds are refused, so a refused call changes nothing.
