@@ -292,3 +292,31 @@ fn soft_bounds_match_their_closed_form_optima_and_the_soft_rows() {
     // The multiplier of x_3 <= 0.5 is 35/6 < 10: the bound holds.
     assert!((x3 - 0.5).abs() < 1e-6, "C: x_3 = {x3}");
 }
+
+#[test]
+fn mpcc_check_counts_the_soft_bounds_and_locates_bad_penalties() {
+    let (code, stdout, stderr) = common::mpcc(&["check", "tests/soft-bounds/soft_box.mpc"]);
+    assert_eq!(code, Some(0), "{stdout}\n{stderr}");
+    assert!(
+        stdout.contains("bounds      x: 1 of 1 entries (1 soft), u: 1 of 1 entries (1 soft)"),
+        "{stdout}"
+    );
+    let tmp = TempDir(std::env::temp_dir().join(format!("mpcc-soft-check-{}", std::process::id())));
+    std::fs::create_dir_all(&tmp.0).unwrap();
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let text = std::fs::read_to_string(root.join("tests/soft-bounds/soft_box.mpc")).unwrap();
+    let bad = tmp.0.join("bad.mpc");
+    std::fs::write(&bad, text.replace("soft l2 = 10;", "soft l1 = 0, l2 = 0;")).unwrap();
+    let (code, stdout, stderr) = common::mpcc(&["check", bad.to_str().unwrap()]);
+    assert_eq!(code, Some(1), "{stdout}\n{stderr}");
+    let line = text
+        .lines()
+        .position(|l| l.contains("soft l2 = 10;"))
+        .unwrap()
+        + 1;
+    assert!(stderr.contains(&format!("bad.mpc:{line}:5 ]")), "{stderr}");
+    assert!(
+        stderr.contains("soft state bound on `x`: soft with l1 = 0 and l2 = 0"),
+        "{stderr}"
+    );
+}
