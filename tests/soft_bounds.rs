@@ -1,7 +1,7 @@
 //! Soft state and control bounds end to end: `mpcc build` generates the solvers of
 //! `tests/soft-bounds/soft_box.mpc` (horizons 3 and 1) and of `soft_row.mpc` (the same problem
 //! with the soft bounds written as general soft rows) into a temporary directory; a Rust
-//! program (`tests/soft-bounds/main.rs`) solves with them and a C program (`main.c`) uses the
+//! program (`tests/soft-bounds/program.rs`) solves with them and a C program (`main.c`) uses the
 //! C ABI. The outcomes are compared with the optima computed here by hand:
 //!
 //! With N = 1, `x_1 = x_0 + u_0` and the cost `1/2 r u_0^2 + 1/2 p (x_1 - xr)^2` (r = 1,
@@ -84,7 +84,7 @@ fn rust_program(dir: &Path, target: &Path) -> HashMap<String, f64> {
         soft_box_n1 = { path = \"../soft_box_n1\" }\nsoft_row = { path = \"../soft_row\" }\n\
         cartpole_soft = { path = \"../cartpole_soft\" }\n";
     std::fs::write(prog.join("Cargo.toml"), manifest).unwrap();
-    let main = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/soft-bounds/main.rs");
+    let main = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/soft-bounds/program.rs");
     std::fs::copy(main, prog.join("src/main.rs")).unwrap();
     let out = run(
         Command::new(env!("CARGO"))
