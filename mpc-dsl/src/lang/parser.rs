@@ -337,6 +337,48 @@ impl<'s, 'g> Parser<'s, 'g> {
         Ok(())
     }
 
+    /// The options of `irk`: nothing, or `(name = count, ...)` with the names `stages`,
+    /// `steps` and `newton`, each at most once, in any order (defaults 2, 1, 3). Their
+    /// ranges are checked by validation, located at the integrator.
+    fn irk_options(&mut self) -> PResult<Integrator> {
+        let (mut stages, mut steps, mut newton) = (None, None, None);
+        if self.peek() == Some(&Tok::LParen) {
+            self.pos += 1;
+            loop {
+                let (key, kspan) = self.ident("`stages`, `steps` or `newton`")?;
+                let slot = match key.as_str() {
+                    "stages" => &mut stages,
+                    "steps" => &mut steps,
+                    "newton" => &mut newton,
+                    other => {
+                        return Err(syntax(
+                            kspan,
+                            format!(
+                                "unknown irk option `{other}`: the options are `stages`, \
+                                 `steps` and `newton`"
+                            ),
+                        ));
+                    }
+                };
+                if slot.is_some() {
+                    return Err(semantic(kspan, format!("irk option `{key}` given twice")));
+                }
+                self.expect(&Tok::Eq, "`=`")?;
+                *slot = Some(self.count(&format!("irk `{key}`"))?);
+                if self.peek() != Some(&Tok::Comma) {
+                    break;
+                }
+                self.pos += 1;
+            }
+            self.expect(&Tok::RParen, "`)`")?;
+        }
+        Ok(Integrator::Irk {
+            stages: stages.unwrap_or(2),
+            steps: steps.unwrap_or(1),
+            newton: newton.unwrap_or(3),
+        })
+    }
+
     fn count(&mut self, what: &str) -> PResult<usize> {
         let (v, span) = self.const_scalar(what)?;
         if v.fract() != 0.0 || !(0.0..=MAX_DIM as f64).contains(&v) {
@@ -534,7 +576,7 @@ impl<'s, 'g> Parser<'s, 'g> {
         let mut integrator = Integrator::Rk4 { steps: 1 };
         if !discrete {
             let ispan = self.span();
-            let (name, _) = self.ident("an integrator (`rk4` or `euler`)")?;
+            let (name, _) = self.ident("an integrator (`rk4`, `euler` or `irk`)")?;
             integrator = match name.as_str() {
                 "rk4" => {
                     let mut steps = 1;
@@ -546,10 +588,14 @@ impl<'s, 'g> Parser<'s, 'g> {
                     Integrator::Rk4 { steps }
                 }
                 "euler" => Integrator::Euler,
+                "irk" => self.irk_options()?,
                 other => {
                     return Err(syntax(
                         ispan,
-                        format!("unknown integrator `{other}`: use `rk4`, `rk4(k)` or `euler`"),
+                        format!(
+                            "unknown integrator `{other}`: use `rk4`, `rk4(k)`, `euler` or \
+                             `irk(stages = s, steps = k, newton = n)`"
+                        ),
                     ));
                 }
             };
@@ -1269,7 +1315,9 @@ impl<'s, 'g> Parser<'s, 'g> {
                             OcpError::ZeroHorizon | OcpError::NonPositiveDt { .. } => {
                                 horizon_span.clone()
                             }
-                            OcpError::ZeroSubsteps => locate(Some("integrator")),
+                            OcpError::ZeroSubsteps
+                            | OcpError::IrkStages { .. }
+                            | OcpError::IrkZero { .. } => locate(Some("integrator")),
                             OcpError::UnknownSymbol { item, .. } => locate(Some(item)),
                             other => locate(other.culprit()),
                         };
