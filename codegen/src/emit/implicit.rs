@@ -47,8 +47,8 @@ impl Emitter<'_> {
             (augmented_step(true), augmented_step(false))
         } else {
             (
-                quote!(step(x, u, p, Some((a, b)))),
-                quote!(step(x, u, p, None)),
+                quote!(irk_step(x, u, p, Some((a, b)))),
+                quote!(irk_step(x, u, p, None)),
             )
         };
         quote! {
@@ -78,7 +78,7 @@ impl Emitter<'_> {
             pub const NK: usize = #nk;
 
             /// One implicit step of the model's states (NaN on failure).
-            fn step(
+            fn irk_step(
                 x: &SVector<Real, NX_MODEL>,
                 u: &SVector<Real, NU>,
                 p: &SVector<Real, NP>,
@@ -149,7 +149,7 @@ fn augmented_step(jacobians: bool) -> TokenStream {
     if !jacobians {
         return quote! {
             #head
-            let xn = step(&xm, u, p, None);
+            let xn = irk_step(&xm, u, p, None);
             for i in 0..NX_MODEL {
                 r[i] = xn[i];
             }
@@ -160,7 +160,7 @@ fn augmented_step(jacobians: bool) -> TokenStream {
         #head
         let mut am = SMatrix::<Real, NX_MODEL, NX_MODEL>::zeros();
         let mut bm = SMatrix::<Real, NX_MODEL, NU>::zeros();
-        let xn = step(&xm, u, p, Some((&mut am, &mut bm)));
+        let xn = irk_step(&xm, u, p, Some((&mut am, &mut bm)));
         a.as_mut_slice().fill(0.0);
         b.as_mut_slice().fill(0.0);
         for i in 0..NX_MODEL {

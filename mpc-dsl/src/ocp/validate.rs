@@ -528,7 +528,12 @@ impl<'g> Checker<'_, 'g> {
             self.errors.push(OcpError::ZeroSubsteps);
         }
         if let Dynamics::Continuous {
-            integrator: Integrator::Irk { stages, steps, newton },
+            integrator:
+                Integrator::Irk {
+                    stages,
+                    steps,
+                    newton,
+                },
             ..
         } = ocp.dynamics
         {
