@@ -1,0 +1,135 @@
+//! `mpc_runtime::implicit` on a stiff linear system `x' = M x + N u`, against the exact step
+//! `exp([[M, N u], [0, 0]] dt)` (nalgebra's matrix exponential): the state, `A = exp(M dt)`,
+//! `B = int_0^dt exp(M s) ds N`, the order of accuracy `2s` of each Gauss-Legendre method, and
+//! the same step in `f32`.
+
+use mpc_runtime::implicit::{GAUSS_LEGENDRE, Irk, IrkError, irk_step};
+use nalgebra::{SMatrix, SVector};
+
+const DT: f64 = 0.05;
+
+/// A damped oscillator driven through a first-order lag of 5 ms (eigenvalues about
+/// -0.2 +- 2i and -200: stiff at dt = 0.05).
+fn system() -> (SMatrix<f64, 3, 3>, SMatrix<f64, 3, 1>) {
+    let m = SMatrix::<f64, 3, 3>::new(0.0, 1.0, 0.0, -4.0, -0.4, 1.0, 0.0, 0.0, -200.0);
+    let n = SMatrix::<f64, 3, 1>::new(0.0, 0.0, 200.0);
+    (m, n)
+}
+
+/// The exact step and its Jacobians from one 5x5 matrix exponential.
+fn exact(x: &SVector<f64, 3>, u: f64) -> (SVector<f64, 3>, SMatrix<f64, 3, 3>, SMatrix<f64, 3, 1>) {
+    let (m, n) = system();
+    let mut big = SMatrix::<f64, 5, 5>::zeros();
+    big.fixed_view_mut::<3, 3>(0, 0).copy_from(&(m * DT));
+    big.fixed_view_mut::<3, 1>(0, 3).copy_from(&(n * DT));
+    let e = big.exp();
+    let a: SMatrix<f64, 3, 3> = e.fixed_view::<3, 3>(0, 0).into();
+    let b: SMatrix<f64, 3, 1> = e.fixed_view::<3, 1>(0, 3).into();
+    (a * x + b * u, a, b)
+}
+
+fn step<const NK: usize>(
+    stages: usize,
+    steps: usize,
+    x: &SVector<f64, 3>,
+    u: f64,
+) -> Result<(SVector<f64, 3>, SMatrix<f64, 3, 3>, SMatrix<f64, 3, 1>), IrkError> {
+    let (m, n) = system();
+    let irk = Irk {
+        tableau: &GAUSS_LEGENDRE[stages - 1],
+        steps,
+        newton: 1,
+        dt: DT,
+    };
+    let mut f = |x: &SVector<f64, 3>, fx: &mut SMatrix<f64, 3, 3>, fu: &mut SMatrix<f64, 3, 1>| {
+        *fx = m;
+        *fu = n;
+        m * x + n * u
+    };
+    let (mut a, mut b) = (SMatrix::zeros(), SMatrix::zeros());
+    let xn = irk_step::<f64, 3, 1, NK, _>(&irk, x, &mut f, Some((&mut a, &mut b)))?;
+    Ok((xn, a, b))
+}
+
+fn err(stages: usize, steps: usize) -> f64 {
+    let x = SVector::<f64, 3>::new(0.3, -1.0, 2.0);
+    let u = 5.0;
+    let (xe, ae, be) = exact(&x, u);
+    let (xn, a, b) = match stages {
+        1 => step::<3>(1, steps, &x, u),
+        2 => step::<6>(2, steps, &x, u),
+        _ => step::<9>(3, steps, &x, u),
+    }
+    .unwrap();
+    (xn - xe).amax().max((a - ae).amax()).max((b - be).amax())
+}
+
+#[test]
+fn the_step_and_its_jacobians_match_the_matrix_exponential() {
+    // One Newton iteration solves a linear system's collocation equations exactly.
+    let e = err(3, 20);
+    println!("3 stages, 20 substeps: max |irk - expm| over x+, A, B = {e:.2e}");
+    assert!(e < 1e-9, "{e}");
+    // At one substep (dt |lambda| = 10, far beyond an explicit method's stability limit)
+    // Gauss-Legendre is A-stable: the step's `A` does not amplify, 200 steps decay.
+    let x = SVector::<f64, 3>::new(0.3, -1.0, 2.0);
+    for s in 1..=3 {
+        let a = match s {
+            1 => step::<3>(1, 1, &x, 0.0),
+            2 => step::<6>(2, 1, &x, 0.0),
+            _ => step::<9>(3, 1, &x, 0.0),
+        }
+        .unwrap()
+        .1;
+        let mut y = x;
+        for _ in 0..200 {
+            y = a * y;
+        }
+        println!("{s} stage(s), 1 substep: |A^200 x| = {:.2e}", y.norm());
+        assert!(y.norm() < x.norm(), "{s}: {}", y.norm());
+    }
+}
+
+#[test]
+fn each_method_has_order_two_s_against_expm() {
+    for s in 1..=3 {
+        let (lo, hi) = if s == 3 { (8, 16) } else { (32, 64) };
+        let ratio = err(s, lo) / err(s, hi);
+        let expect = f64::powi(2.0, 2 * s as i32);
+        println!(
+            "{s} stage(s): error ratio {ratio:.2} per halving (2^{} = {expect})",
+            2 * s
+        );
+        assert!(
+            ratio > 0.8 * expect && ratio < 1.25 * expect,
+            "{s}: {ratio}"
+        );
+    }
+}
+
+#[test]
+fn the_step_runs_in_f32() {
+    let (m, n) = system();
+    let (m32, n32) = (m.cast::<f32>(), n.cast::<f32>());
+    let irk = Irk {
+        tableau: &GAUSS_LEGENDRE[1],
+        steps: 4,
+        newton: 2,
+        dt: DT,
+    };
+    let mut f = |x: &SVector<f32, 3>, fx: &mut SMatrix<f32, 3, 3>, fu: &mut SMatrix<f32, 3, 1>| {
+        *fx = m32;
+        *fu = n32;
+        m32 * x + n32 * 5.0
+    };
+    let x = SVector::<f32, 3>::new(0.3, -1.0, 2.0);
+    let (mut a, mut b) = (SMatrix::zeros(), SMatrix::zeros());
+    let xn = irk_step::<f32, 3, 1, 6, _>(&irk, &x, &mut f, Some((&mut a, &mut b))).unwrap();
+    let (x64, a64, b64) = step::<6>(2, 4, &x.cast::<f64>(), 5.0).unwrap();
+    let e = (xn.cast::<f64>() - x64)
+        .amax()
+        .max((a.cast::<f64>() - a64).amax())
+        .max((b.cast::<f64>() - b64).amax());
+    println!("f32 against f64: {e:.2e}");
+    assert!(e < 1e-4, "{e}");
+}
