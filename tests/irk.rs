@@ -12,7 +12,9 @@
 //!   step itself;
 //! - a converged `solve_sqp` and an RTI closed loop on the generated solver, with the plant
 //!   integrated by the runtime's step at 3 stages and 20 substeps;
-//! - the checked-in crate is what the generator writes now.
+//! - the f32 crate: the same step to 1e-3, and the closed loop;
+//! - the exact Hessian refused with a typed error (no second-order sensitivities);
+//! - the checked-in crates are what the generator writes now.
 
 use mpc_dsl::Graph;
 use mpc_dsl::lang::{ParseOptions, parse};
@@ -260,6 +262,67 @@ fn solve_sqp_converges_and_the_closed_loop_reaches_the_target() {
 }
 
 #[test]
+fn the_f32_crate_steps_like_the_f64_one_and_flies() {
+    // f32 rounding (about 1e-7 relative) through the Newton iterations and the stiff
+    // actuator's 250 1/s: the same step to 1e-4 of the reference's scale.
+    let mut worst = 0.0_f64;
+    for r in reference().iter().filter(|r| r.kind == "step") {
+        let x = SVector::<f32, 3>::from(r.x0.map(|v| v as f32));
+        let u = SVector::<f32, 1>::from([r.u as f32]);
+        let v = stiff_actuator_f32::functions::dynamics_value(&x, &u, &SVector::from([1.0f32]));
+        let v64 = [f64::from(v[0]), f64::from(v[1]), f64::from(v[2])];
+        worst = worst.max(max_err(&v64, &r.x1));
+    }
+    println!("f32: max |irk - Radau| over one step {worst:.3e}");
+    assert!(worst < 1e-3, "{worst}");
+    let mut s = stiff_actuator_f32::Solver::new();
+    let mut x = [0.0; 3];
+    for _ in 0..60 {
+        s.set_x0(&x.map(|v| v as f32)).unwrap();
+        s.prepare();
+        assert_eq!(s.feedback().status, RtiStatus::Ok);
+        x = plant(x, f64::from(s.u0()[0]));
+    }
+    println!("f32 closed loop after 3 s: {x:?}");
+    assert!((x[0] - 1.0).abs() < 1e-2 && x[1].abs() < 1e-2, "{x:?}");
+}
+
+#[test]
+fn the_exact_hessian_is_refused_with_a_typed_error() {
+    let g = Graph::new();
+    let ocp = parse(&g, SRC, &ParseOptions::default()).unwrap().ocp;
+    let opts = mpc_codegen::Options {
+        exact_hessian: true,
+        ..mpc_codegen::Options::new()
+    };
+    let e = mpc_codegen::generate(&ocp, &opts).expect_err("refused");
+    assert!(
+        matches!(e, mpc_codegen::CodegenError::ExactHessianWithIrk),
+        "{e}"
+    );
+    assert!(e.to_string().contains("integrate with `rk4(k)`"), "{e}");
+    // The same from the command line, with nothing written.
+    let dir = std::env::temp_dir().join(format!("mpcc-irk-exact-{}", std::process::id()));
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_mpcc"))
+        .args([
+            "build",
+            "models/stiff_actuator.mpc",
+            "--exact-hessian",
+            "-o",
+        ])
+        .arg(&dir)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("exact Hessian"),
+        "{err}"
+    );
+    assert!(!dir.exists());
+}
+
+#[test]
 fn the_stiff_crate_is_current() {
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
     let opts = mpc_codegen::Options {
@@ -271,7 +334,18 @@ fn the_stiff_crate_is_current() {
     let stale = generated.check(&root.join("generated/stiff_actuator"));
     assert!(
         stale.is_empty(),
-        "generated/stiff_actuator: {stale:?} differ; regenerate with `cargo run -- build \
-         models/stiff_actuator.mpc --runtime-path ../../runtime -o generated/stiff_actuator`"
+        "generated/stiff_actuator: {stale:?} differ"
+    );
+    let f32_opts = mpc_codegen::Options {
+        scalar: mpc_codegen::Scalar::F32,
+        crate_name: Some("stiff_actuator_f32".into()),
+        ..opts
+    };
+    let generated = mpc_codegen::generate_file(&model, None, &f32_opts).unwrap();
+    let stale = generated.check(&root.join("generated/stiff_actuator_f32"));
+    // Regenerate with the commands of generated/README.md.
+    assert!(
+        stale.is_empty(),
+        "generated/stiff_actuator_f32: {stale:?} differ"
     );
 }
