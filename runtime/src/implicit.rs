@@ -149,8 +149,7 @@ pub fn lu_solve<T: Real, const N: usize>(
     piv: &[usize; N],
     b: &mut SVector<T, N>,
 ) {
-    for k in 0..N {
-        let p = piv[k];
+    for (k, &p) in piv.iter().enumerate() {
         if p != k && p < N {
             b.swap_rows(k, p);
         }

@@ -8,6 +8,9 @@ use nalgebra::{SMatrix, SVector};
 
 const DT: f64 = 0.05;
 
+/// A step's state and Jacobians `A`, `B`.
+type Step = (SVector<f64, 3>, SMatrix<f64, 3, 3>, SMatrix<f64, 3, 1>);
+
 /// A damped oscillator driven through a first-order lag of 5 ms (eigenvalues about
 /// -0.2 +- 2i and -200: stiff at dt = 0.05).
 fn system() -> (SMatrix<f64, 3, 3>, SMatrix<f64, 3, 1>) {
@@ -17,7 +20,7 @@ fn system() -> (SMatrix<f64, 3, 3>, SMatrix<f64, 3, 1>) {
 }
 
 /// The exact step and its Jacobians from one 5x5 matrix exponential.
-fn exact(x: &SVector<f64, 3>, u: f64) -> (SVector<f64, 3>, SMatrix<f64, 3, 3>, SMatrix<f64, 3, 1>) {
+fn exact(x: &SVector<f64, 3>, u: f64) -> Step {
     let (m, n) = system();
     let mut big = SMatrix::<f64, 5, 5>::zeros();
     big.fixed_view_mut::<3, 3>(0, 0).copy_from(&(m * DT));
@@ -33,7 +36,7 @@ fn step<const NK: usize>(
     steps: usize,
     x: &SVector<f64, 3>,
     u: f64,
-) -> Result<(SVector<f64, 3>, SMatrix<f64, 3, 3>, SMatrix<f64, 3, 1>), IrkError> {
+) -> Result<Step, IrkError> {
     let (m, n) = system();
     let irk = Irk {
         tableau: &GAUSS_LEGENDRE[stages - 1],
