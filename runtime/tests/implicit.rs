@@ -1,7 +1,7 @@
 //! `mpc_runtime::implicit` on a stiff linear system `x' = M x + N u`, against the exact step
 //! `exp([[M, N u], [0, 0]] dt)` (nalgebra's matrix exponential): the state, `A = exp(M dt)`,
 //! `B = int_0^dt exp(M s) ds N`, the order of accuracy `2s` of each Gauss-Legendre method, and
-//! the same step in `f32`.
+//! the same step in `f32`; and a singular Newton system in an RTI: a failed step, no panic.
 
 use mpc_runtime::implicit::{GAUSS_LEGENDRE, Irk, IrkError, irk_step};
 use nalgebra::{SMatrix, SVector};
@@ -135,4 +135,91 @@ fn the_step_runs_in_f32() {
         .max((b.cast::<f64>() - b64).amax());
     println!("f32 against f64: {e:.2e}");
     assert!(e < 1e-4, "{e}");
+}
+
+/// `x' = lam x + u` integrated by one-stage Gauss-Legendre; with `lam = 1 / (dt a_11)` every
+/// Newton matrix `1 - dt a_11 lam` is singular.
+#[derive(Clone, Copy, Debug)]
+struct Implicit {
+    lam: f64,
+}
+
+impl mpc_runtime::Model<f64, 1, 1, 0, 2, 1, 0, 0> for Implicit {
+    fn dynamics(
+        &self,
+        x: &SVector<f64, 1>,
+        u: &SVector<f64, 1>,
+        _p: &SVector<f64, 0>,
+        a: &mut SMatrix<f64, 1, 1>,
+        b: &mut SMatrix<f64, 1, 1>,
+    ) -> SVector<f64, 1> {
+        let irk = Irk {
+            tableau: &GAUSS_LEGENDRE[0],
+            steps: 1,
+            newton: 2,
+            dt: DT,
+        };
+        let lam = self.lam;
+        let mut f =
+            |x: &SVector<f64, 1>, fx: &mut SMatrix<f64, 1, 1>, fu: &mut SMatrix<f64, 1, 1>| {
+                fx[(0, 0)] = lam;
+                fu[(0, 0)] = 1.0;
+                x * lam + u
+            };
+        mpc_runtime::implicit::irk_step_or_nan::<f64, 1, 1, 1, _>(&irk, x, &mut f, Some((a, b)))
+    }
+    fn residual(
+        &self,
+        x: &SVector<f64, 1>,
+        u: &SVector<f64, 1>,
+        _p: &SVector<f64, 0>,
+        jx: &mut SMatrix<f64, 2, 1>,
+        ju: &mut SMatrix<f64, 2, 1>,
+    ) -> SVector<f64, 2> {
+        *jx = SMatrix::from_column_slice(&[1.0, 0.0]);
+        *ju = SMatrix::from_column_slice(&[0.0, 1.0]);
+        SVector::from([x[0], u[0]])
+    }
+    fn terminal_residual(
+        &self,
+        x: &SVector<f64, 1>,
+        _p: &SVector<f64, 0>,
+        jx: &mut SMatrix<f64, 1, 1>,
+    ) -> SVector<f64, 1> {
+        *jx = SMatrix::identity();
+        *x
+    }
+}
+
+#[test]
+fn a_singular_newton_system_is_a_failed_step_not_a_panic() {
+    type Solver = mpc_runtime::Rti<f64, Implicit, 1, 1, 0, 2, 1, 0, 0, 5, 0, 0>;
+    let run = |lam: f64| {
+        let mut s = Box::new(Solver::new(Implicit { lam }));
+        s.set_weights(&SMatrix::identity(), &SMatrix::identity())
+            .unwrap();
+        let mut statuses = Vec::new();
+        let mut u = 0.0;
+        for _ in 0..3 {
+            s.prepare();
+            let (u0, info) = s.feedback(&SVector::from([1.0]));
+            statuses.push(info.status);
+            u = u0[0];
+        }
+        (statuses, u)
+    };
+    // A regular system (stable, lam = -1) solves; the singular one fails every step, and the
+    // control it returns is finite.
+    let (ok, _) = run(-1.0);
+    assert!(
+        ok.iter().all(|&s| s == mpc_runtime::RtiStatus::Ok),
+        "{ok:?}"
+    );
+    let (failed, u) = run(1.0 / (DT * 0.5));
+    println!("singular Newton matrix: statuses {failed:?}, u0 = {u}");
+    assert!(
+        failed.iter().all(|&s| s != mpc_runtime::RtiStatus::Ok),
+        "{failed:?}"
+    );
+    assert!(u.is_finite());
 }
