@@ -13,28 +13,12 @@ use super::{Emitter, doc_lines, ul};
 use crate::lower::IrkStep;
 
 impl Emitter<'_> {
-    /// `ode`, `IRK`, `NK`, `dynamics` and `dynamics_value` of a model integrated by `irk`.
+    /// `ode`, `IRK`, `NK`, `irk_step`, `dynamics` and `dynamics_value` of a model integrated
+    /// by `irk`.
     pub(super) fn irk_fns(&self, irk: &IrkStep, uses: &mut Uses) -> TokenStream {
         let l = self.l;
-        let rhs = body(
-            &l.dynamics,
-            self.s,
-            &["fx", "fu"],
-            Some(quote!(SVector<Real, NX_MODEL>)),
-            uses,
-        );
-        let (steps, newton) = (ul(irk.steps), ul(irk.newton));
-        let irk_doc = doc_lines(&format!(
-            "The implicit integrator: Gauss-Legendre collocation with {} stage(s) (order {}), \
-             {} substep(s) per interval and {} Newton iteration(s) per substep.",
-            irk.stages,
-            2 * irk.stages,
-            irk.steps,
-            irk.newton
-        ));
-        let table = ul(irk.stages.saturating_sub(1));
-        let nk = ul(irk.stages * l.nx_model);
-        let dt = l.dt;
+        let ode = self.ode_fn(uses);
+        let settings = self.irk_settings(irk);
         let doc = doc_lines(&format!(
             "Discrete dynamics over one interval ({} s, {}): returns `F(x, u, p)` and writes \
              `a = dF/dx`, `b = dF/du`. A singular Newton matrix or a non-finite step gives NaN \
@@ -52,6 +36,44 @@ impl Emitter<'_> {
             )
         };
         quote! {
+            #ode
+
+            #settings
+
+            #doc
+            #[inline(never)]
+            pub fn dynamics(
+                x: &SVector<Real, NX>,
+                u: &SVector<Real, NU>,
+                p: &SVector<Real, NP>,
+                a: &mut SMatrix<Real, NX, NX>,
+                b: &mut SMatrix<Real, NX, NU>,
+            ) -> SVector<Real, NX> {
+                #dyn_body
+            }
+
+            /// [`dynamics`]'s `F(x, u, p)` alone, without the Jacobians (the full SQP's merit
+            /// function): the same Newton iterations, no sensitivity solve.
+            pub fn dynamics_value(
+                x: &SVector<Real, NX>,
+                u: &SVector<Real, NU>,
+                p: &SVector<Real, NP>,
+            ) -> SVector<Real, NX> {
+                #value_body
+            }
+        }
+    }
+
+    /// `ode`: the right-hand side and its Jacobians as straight-line code.
+    fn ode_fn(&self, uses: &mut Uses) -> TokenStream {
+        let rhs = body(
+            &self.l.dynamics,
+            self.s,
+            &["fx", "fu"],
+            Some(quote!(SVector<Real, NX_MODEL>)),
+            uses,
+        );
+        quote! {
             /// The ODE's right-hand side `f(x, u, p)` with `fx = df/dx`, `fu = df/du`: what
             /// the implicit step evaluates at its collocation points.
             #[allow(unused_variables, unused_mut, unused_assignments)]
@@ -65,7 +87,25 @@ impl Emitter<'_> {
             ) -> SVector<Real, NX_MODEL> {
                 #rhs
             }
+        }
+    }
 
+    /// `IRK` (the method and its settings), `NK` and `irk_step`, the runtime's step of the
+    /// model's states around `ode`.
+    fn irk_settings(&self, irk: &IrkStep) -> TokenStream {
+        let (steps, newton) = (ul(irk.steps), ul(irk.newton));
+        let irk_doc = doc_lines(&format!(
+            "The implicit integrator: Gauss-Legendre collocation with {} stage(s) (order {}), \
+             {} substep(s) per interval and {} Newton iteration(s) per substep.",
+            irk.stages,
+            2 * irk.stages,
+            irk.steps,
+            irk.newton
+        ));
+        let table = ul(irk.stages.saturating_sub(1));
+        let nk = ul(irk.stages * self.l.nx_model);
+        let dt = self.l.dt;
+        quote! {
             #irk_doc
             pub const IRK: mpc_runtime::implicit::Irk = mpc_runtime::implicit::Irk {
                 tableau: &mpc_runtime::implicit::GAUSS_LEGENDRE[#table],
@@ -93,28 +133,6 @@ impl Emitter<'_> {
                 mpc_runtime::implicit::irk_step_or_nan::<Real, NX_MODEL, NU, NK, _>(
                     &IRK, x, &mut f, ab,
                 )
-            }
-
-            #doc
-            #[inline(never)]
-            pub fn dynamics(
-                x: &SVector<Real, NX>,
-                u: &SVector<Real, NU>,
-                p: &SVector<Real, NP>,
-                a: &mut SMatrix<Real, NX, NX>,
-                b: &mut SMatrix<Real, NX, NU>,
-            ) -> SVector<Real, NX> {
-                #dyn_body
-            }
-
-            /// [`dynamics`]'s `F(x, u, p)` alone, without the Jacobians (the full SQP's merit
-            /// function): the same Newton iterations, no sensitivity solve.
-            pub fn dynamics_value(
-                x: &SVector<Real, NX>,
-                u: &SVector<Real, NU>,
-                p: &SVector<Real, NP>,
-            ) -> SVector<Real, NX> {
-                #value_body
             }
         }
     }
