@@ -562,11 +562,16 @@ fn describe(ocp: &Ocp<'_>) -> String {
                     stages,
                     steps,
                     newton,
+                    collocation,
                 },
             ..
         } => format!(
-            "ode, irk (Gauss-Legendre) with {stages} stage(s), {steps} substep(s), \
-             {newton} Newton iteration(s)"
+            "ode, irk ({}) with {stages} stage(s), {steps} substep(s), {newton} Newton \
+             iteration(s)",
+            match collocation {
+                mpc_dsl::ocp::Collocation::GaussLegendre => "Gauss-Legendre",
+                mpc_dsl::ocp::Collocation::RadauIia => "Radau IIA",
+            }
         ),
         Dynamics::Discrete { .. } => "discrete map".into(),
     };

@@ -8,6 +8,7 @@
 //! - the order of Gauss-Legendre collocation with 1, 2 and 3 stages (the error ratio when the
 //!   step is halved) against the same reference, through the runtime's step on this test's
 //!   own copy of the ODE;
+//! - Radau IIA at one substep damping the actuator's transient more than Gauss-Legendre;
 //! - the step's sensitivities `A`, `B` against central finite differences of the generated
 //!   step itself;
 //! - a converged `solve_sqp` and an RTI closed loop on the generated solver, with the plant
@@ -19,7 +20,7 @@
 use mpc_dsl::Graph;
 use mpc_dsl::lang::{ParseOptions, parse};
 use mpc_runtime::RtiStatus;
-use mpc_runtime::implicit::{GAUSS_LEGENDRE, Irk, irk_step};
+use mpc_runtime::implicit::{GAUSS_LEGENDRE, Irk, RADAU_IIA, Tableau, irk_step};
 use mpc_runtime::nalgebra::{SMatrix, SVector};
 use stiff_actuator::{NP, NU, NX, Solver, functions};
 
@@ -78,8 +79,19 @@ fn ode(
 
 /// The runtime's implicit step on [`ode`] with `stages` and `steps` (Newton to convergence).
 fn runtime_step(stages: usize, steps: usize, x: [f64; 3], u: f64) -> [f64; 3] {
+    runtime_step_with(&GAUSS_LEGENDRE, stages, steps, x, u)
+}
+
+/// [`runtime_step`] with the given family of tableaus.
+fn runtime_step_with(
+    tables: &'static [Tableau; 3],
+    stages: usize,
+    steps: usize,
+    x: [f64; 3],
+    u: f64,
+) -> [f64; 3] {
     let irk = Irk {
-        tableau: &GAUSS_LEGENDRE[stages - 1],
+        tableau: &tables[stages - 1],
         steps,
         newton: 8,
         dt: DT,
@@ -187,6 +199,27 @@ fn gauss_legendre_has_order_two_s() {
                 "stages {stages}: {r} vs {expect}"
             );
         }
+    }
+}
+
+#[test]
+fn radau_iia_damps_the_actuator_transient_in_one_substep() {
+    // One substep per interval (dt / tau = 12.5): what is left of the actuator's transient
+    // after a step is the stability function at -12.5 (the flow: 4e-6). Gauss-Legendre's
+    // tends to (-1)^s (1, 2, 3 stages: -0.72, 0.38, -0.15), Radau IIA's (L-stable) to 0
+    // (0.074, -0.090, 0.059).
+    let rows = reference();
+    for stages in 1..=3 {
+        let err = |tables| {
+            (rows.iter().filter(|r| r.kind == "step"))
+                .map(|r| max_err(&runtime_step_with(tables, stages, 1, r.x0, r.u), &r.x1))
+                .fold(0.0, f64::max)
+        };
+        let (radau, gauss) = (err(&RADAU_IIA), err(&GAUSS_LEGENDRE));
+        println!(
+            "{stages} stage(s), 1 substep: max |step - Radau|: Radau IIA {radau:.2e}, Gauss-Legendre {gauss:.2e}"
+        );
+        assert!(radau < 0.5 * gauss, "{stages}: {radau} against {gauss}");
     }
 }
 

@@ -4,8 +4,9 @@
 //! linked with the line `mpcc build` printed. The C program flies the stiff model against its
 //! own fine RK4 integration of the ODE; every step must be OK and the cart at the target.
 //! Needs cc (the test fails without it). And the same model with an input-rate cost (the
-//! augmented state of the emitted step) as a Rust crate in a temporary directory: its
-//! sensitivities against central differences, `solve_sqp`, a closed loop.
+//! augmented state of the emitted step) and Radau IIA collocation as a Rust crate in a
+//! temporary directory: its sensitivities against central differences, `solve_sqp`, a
+//! closed loop.
 #![cfg(unix)]
 
 use std::path::Path;
@@ -87,7 +88,7 @@ fn a_c_program_flies_the_irk_solver() {
     );
 }
 
-/// The stiff model with an input-rate cost on `F_cmd`.
+/// The stiff model with an input-rate cost on `F_cmd`, integrated by 3-stage Radau IIA.
 fn rate_model() -> String {
     let src = include_str!("../models/stiff_actuator.mpc")
         .replace("model stiff_actuator;", "model stiff_rate;")
@@ -98,8 +99,12 @@ fn rate_model() -> String {
         .replace(
             "    R = diag(0.01)",
             "    rate = diag(0.001) prev F_prev;\n    R = diag(0.01)",
+        )
+        .replace(
+            "irk(stages = 2, steps = 4, newton = 3)",
+            "irk(stages = 3, steps = 2, newton = 3, collocation = radau_iia)",
         );
-    assert!(src.contains("rate = ") && src.contains("F_prev global"));
+    assert!(src.contains("rate = ") && src.contains("F_prev global") && src.contains("radau"));
     src
 }
 

@@ -1,10 +1,11 @@
-//! `dynamics ode irk(stages = s, steps = k, newton = n)`: what it parses to, its defaults,
+//! `dynamics ode irk(stages = s, steps = k, newton = n, collocation = c)`: what it parses
+//! to, its defaults,
 //! the Rust builder's equivalent, and the located errors of wrong options (from the parser)
 //! and out-of-range values (from validation, located at the integrator).
 
 use mpc_dsl::Graph;
 use mpc_dsl::lang::{ParseOptions, parse};
-use mpc_dsl::ocp::{Decl, Dynamics, Integrator, Ocp, OcpError};
+use mpc_dsl::ocp::{Collocation, Decl, Dynamics, Integrator, Ocp, OcpError};
 
 /// A model whose integrator is `integ`; the integrator starts on line 4, column 14.
 fn model(integ: &str) -> String {
@@ -42,6 +43,7 @@ fn irk(stages: usize, steps: usize, newton: usize) -> Integrator {
         stages,
         steps,
         newton,
+        collocation: Collocation::GaussLegendre,
     }
 }
 
@@ -57,6 +59,20 @@ fn the_options_parse_in_any_order_with_defaults() {
     assert_eq!(integrator_of("irk"), Integrator::gauss_legendre(2));
     // The options are constant expressions, as rk4's substeps are.
     assert_eq!(integrator_of("irk(stages = 1 + 2)"), irk(3, 1, 3));
+    let radau = Integrator::Irk {
+        stages: 3,
+        steps: 2,
+        newton: 3,
+        collocation: Collocation::RadauIia,
+    };
+    assert_eq!(
+        integrator_of("irk(collocation = radau_iia, stages = 3, steps = 2)"),
+        radau
+    );
+    assert_eq!(
+        integrator_of("irk(collocation = gauss_legendre)"),
+        irk(2, 1, 3)
+    );
 }
 
 #[test]
@@ -142,6 +158,9 @@ fn wrong_options_are_located_errors() {
     let (m, at) = error_of("irk(stages = 1.5)");
     assert!(m.contains("whole number"), "{m}");
     assert_eq!(at, (4, 27));
+    let (m, at) = error_of("irk(collocation = lobatto)");
+    assert!(m.contains("unknown collocation `lobatto`"), "{m}");
+    assert_eq!(at, (4, 32));
     let (m, _) = error_of("gl(2)");
     assert!(
         m.contains("`irk(stages = s, steps = k, newton = n)`"),

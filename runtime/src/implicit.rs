@@ -1,6 +1,7 @@
-//! Implicit integration for stiff dynamics: Gauss-Legendre collocation (an implicit
-//! Runge-Kutta method) with a fixed number of Newton iterations and exact sensitivities, the
-//! step generated code calls for `dynamics ode irk(...)`.
+//! Implicit integration for stiff dynamics: Gauss-Legendre or Radau IIA collocation (implicit
+//! Runge-Kutta methods, [`GAUSS_LEGENDRE`], [`RADAU_IIA`]) with a fixed number of Newton
+//! iterations and exact sensitivities, the step generated code calls for
+//! `dynamics ode irk(...)`.
 //!
 //! One substep of length `h` from `x` solves the collocation equations for the stage
 //! derivatives `K = (K_1, ..., K_s)`:
@@ -34,7 +35,7 @@ use nalgebra::{SMatrix, SVector};
 
 use crate::Real;
 
-/// The Butcher tableau of a Gauss-Legendre method with at most three stages (entries beyond
+/// The Butcher tableau of a collocation method with at most three stages (entries beyond
 /// `stages` are zero).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Tableau {
@@ -79,6 +80,44 @@ pub const GAUSS_LEGENDRE: [Tableau; 3] = [
             [0.26798833376246944, 0.48042111196938336, 0.1388888888888889],
         ],
         b: [0.2777777777777778, 0.4444444444444444, 0.2777777777777778],
+    },
+];
+
+/// Radau IIA collocation with 1, 2 and 3 stages (orders 1, 3 and 5; L-stable: a transient
+/// much faster than a step is damped out, where Gauss-Legendre only keeps it bounded): index
+/// `s - 1`. One stage is implicit Euler. The entries are the closed forms (with `sqrt(6)`)
+/// rounded to `f64`.
+pub const RADAU_IIA: [Tableau; 3] = [
+    Tableau {
+        stages: 1,
+        a: [[1.0, 0.0, 0.0], [0.0; 3], [0.0; 3]],
+        b: [1.0, 0.0, 0.0],
+    },
+    Tableau {
+        stages: 2,
+        a: [
+            [0.4166666666666667, -0.08333333333333333, 0.0],
+            [0.75, 0.25, 0.0],
+            [0.0; 3],
+        ],
+        b: [0.75, 0.25, 0.0],
+    },
+    Tableau {
+        stages: 3,
+        a: [
+            [
+                0.19681547722366044,
+                -0.06553542585019838,
+                0.02377097434822015,
+            ],
+            [
+                0.3944243147390873,
+                0.29207341166522843,
+                -0.04154875212599792,
+            ],
+            [0.37640306270046725, 0.5124858261884216, 0.1111111111111111],
+        ],
+        b: [0.37640306270046725, 0.5124858261884216, 0.1111111111111111],
     },
 ];
 

@@ -2,8 +2,9 @@
 //! `exp([[M, N u], [0, 0]] dt)` (nalgebra's matrix exponential): the state, `A = exp(M dt)`,
 //! `B = int_0^dt exp(M s) ds N`, the order of accuracy `2s` of each Gauss-Legendre method, and
 //! the same step in `f32`; and a singular Newton system in an RTI: a failed step, no panic.
+//! Radau IIA: its order `2s - 1` and its damping of the stiff mode (L-stability).
 
-use mpc_runtime::implicit::{GAUSS_LEGENDRE, Irk, IrkError, irk_step};
+use mpc_runtime::implicit::{GAUSS_LEGENDRE, Irk, IrkError, RADAU_IIA, Tableau, irk_step};
 use nalgebra::{SMatrix, SVector};
 
 const DT: f64 = 0.05;
@@ -37,9 +38,19 @@ fn step<const NK: usize>(
     x: &SVector<f64, 3>,
     u: f64,
 ) -> Result<Step, IrkError> {
+    step_with::<NK>(&GAUSS_LEGENDRE, stages, steps, x, u)
+}
+
+fn step_with<const NK: usize>(
+    tables: &'static [Tableau; 3],
+    stages: usize,
+    steps: usize,
+    x: &SVector<f64, 3>,
+    u: f64,
+) -> Result<Step, IrkError> {
     let (m, n) = system();
     let irk = Irk {
-        tableau: &GAUSS_LEGENDRE[stages - 1],
+        tableau: &tables[stages - 1],
         steps,
         newton: 1,
         dt: DT,
@@ -55,13 +66,17 @@ fn step<const NK: usize>(
 }
 
 fn err(stages: usize, steps: usize) -> f64 {
+    err_with(&GAUSS_LEGENDRE, stages, steps)
+}
+
+fn err_with(tables: &'static [Tableau; 3], stages: usize, steps: usize) -> f64 {
     let x = SVector::<f64, 3>::new(0.3, -1.0, 2.0);
     let u = 5.0;
     let (xe, ae, be) = exact(&x, u);
     let (xn, a, b) = match stages {
-        1 => step::<3>(1, steps, &x, u),
-        2 => step::<6>(2, steps, &x, u),
-        _ => step::<9>(3, steps, &x, u),
+        1 => step_with::<3>(tables, 1, steps, &x, u),
+        2 => step_with::<6>(tables, 2, steps, &x, u),
+        _ => step_with::<9>(tables, 3, steps, &x, u),
     }
     .unwrap();
     (xn - xe).amax().max((a - ae).amax()).max((b - be).amax())
@@ -222,4 +237,37 @@ fn a_singular_newton_system_is_a_failed_step_not_a_panic() {
         "{failed:?}"
     );
     assert!(u.is_finite());
+}
+
+#[test]
+fn radau_iia_has_order_two_s_minus_one_and_damps_the_stiff_mode() {
+    // The error constants differ: implicit Euler needs smaller steps to be asymptotic.
+    for (s, lo) in [(1, 256), (2, 32), (3, 8)] {
+        let hi = 2 * lo;
+        let ratio = err_with(&RADAU_IIA, s, lo) / err_with(&RADAU_IIA, s, hi);
+        let expect = f64::powi(2.0, 2 * s as i32 - 1);
+        println!("Radau IIA, {s} stage(s): error ratio {ratio:.2} per halving (expected {expect})");
+        assert!(
+            ratio > 0.8 * expect && ratio < 1.25 * expect,
+            "{s}: {ratio}"
+        );
+    }
+    // One substep, dt |lambda| = 10 on the lag: L-stability damps it (the exact factor is
+    // exp(-10) = 4.5e-5); Gauss-Legendre's stability function tends to (-1)^s instead.
+    let x = SVector::<f64, 3>::new(0.3, -1.0, 2.0);
+    for s in 1..=3 {
+        let radau = match s {
+            1 => step_with::<3>(&RADAU_IIA, 1, 1, &x, 0.0),
+            2 => step_with::<6>(&RADAU_IIA, 2, 1, &x, 0.0),
+            _ => step_with::<9>(&RADAU_IIA, 3, 1, &x, 0.0),
+        };
+        let gauss = match s {
+            1 => step::<3>(1, 1, &x, 0.0),
+            2 => step::<6>(2, 1, &x, 0.0),
+            _ => step::<9>(3, 1, &x, 0.0),
+        };
+        let (r, g) = (radau.unwrap().1[(2, 2)], gauss.unwrap().1[(2, 2)]);
+        println!("{s} stage(s), dt lambda = -10: Radau IIA {r:.2e}, Gauss-Legendre {g:.2e}");
+        assert!(r.abs() < 0.1 && r.abs() < g.abs(), "{s}: {r} against {g}");
+    }
 }

@@ -1,5 +1,6 @@
 //! The irk test's Rust program (tests/irk_c.rs): the stiff model with an input-rate cost
-//! (its state augmented with the last control, `u_last+ = u`), generated into a temporary
+//! (its state augmented with the last control, `u_last+ = u`) and Radau IIA collocation
+//! (`irk(stages = 3, steps = 2, collocation = radau_iia)`), generated into a temporary
 //! directory. Prints the largest relative difference between the step's `[A B]` and central
 //! differences of `dynamics_value`, then runs `solve_sqp` from rest and a 60-step closed loop
 //! on the generated step itself, and prints "fd STATUS ITERATIONS s v F".
@@ -8,6 +9,7 @@ use mpc_runtime::nalgebra::{SMatrix, SVector};
 use stiff_rate::{NU, NX, NX_MODEL, P_DEFAULT, RtiStatus, Solver, functions};
 
 fn main() {
+    assert_eq!(functions::IRK.tableau, &mpc_runtime::implicit::RADAU_IIA[2]);
     let p = SVector::from(P_DEFAULT);
     let x0 = [0.7, -0.4, 5.0, 3.0];
     let u0 = [12.0];

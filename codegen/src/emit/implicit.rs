@@ -94,13 +94,15 @@ impl Emitter<'_> {
     /// model's states around `ode`.
     fn irk_settings(&self, irk: &IrkStep) -> TokenStream {
         let (steps, newton) = (ul(irk.steps), ul(irk.newton));
+        let (method, order, tables) = if irk.radau {
+            ("Radau IIA", 2 * irk.stages - 1, quote!(RADAU_IIA))
+        } else {
+            ("Gauss-Legendre", 2 * irk.stages, quote!(GAUSS_LEGENDRE))
+        };
         let irk_doc = doc_lines(&format!(
-            "The implicit integrator: Gauss-Legendre collocation with {} stage(s) (order {}), \
+            "The implicit integrator: {method} collocation with {} stage(s) (order {order}), \
              {} substep(s) per interval and {} Newton iteration(s) per substep.",
-            irk.stages,
-            2 * irk.stages,
-            irk.steps,
-            irk.newton
+            irk.stages, irk.steps, irk.newton
         ));
         let table = ul(irk.stages.saturating_sub(1));
         let nk = ul(irk.stages * self.l.nx_model);
@@ -108,7 +110,7 @@ impl Emitter<'_> {
         quote! {
             #irk_doc
             pub const IRK: mpc_runtime::implicit::Irk = mpc_runtime::implicit::Irk {
-                tableau: &mpc_runtime::implicit::GAUSS_LEGENDRE[#table],
+                tableau: &mpc_runtime::implicit::#tables[#table],
                 steps: #steps,
                 newton: #newton,
                 dt: #dt,

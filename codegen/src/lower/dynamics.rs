@@ -1,7 +1,7 @@
 //! Lowering the dynamics: discretized with their sensitivities, the functions `dynamics`
 //! and `dynamics value`, and the dynamics' Lagrangian Hessian.
 
-use mpc_dsl::ocp::{Dynamics, Integrator};
+use mpc_dsl::ocp::{Collocation, Dynamics, Integrator};
 use mpc_dsl::{DslError, Graph, Matrix, Ocp, Vector};
 
 use super::{Arg, Builder, Function, IrkStep, Symbols, Target};
@@ -57,12 +57,14 @@ pub(super) fn irk_of(ocp: &Ocp<'_>) -> Option<IrkStep> {
                     stages,
                     steps,
                     newton,
+                    collocation,
                 },
             ..
         } => Some(IrkStep {
             stages,
             steps,
             newton,
+            radau: collocation == Collocation::RadauIia,
         }),
         _ => None,
     }
@@ -87,9 +89,16 @@ pub(super) fn irk_functions<'g>(
     let args = [Arg::X, Arg::U, Arg::P];
     let value = b.function("dynamics right-hand side", &args, value_out)?;
     let how = format!(
-        "Gauss-Legendre IRK, {} stage(s), {} substep(s), {} Newton iteration(s) each, \
-         sensitivities by the implicit function theorem",
-        step.stages, step.steps, step.newton
+        "{} IRK, {} stage(s), {} substep(s), {} Newton iteration(s) each, sensitivities by \
+         the implicit function theorem",
+        if step.radau {
+            "Radau IIA"
+        } else {
+            "Gauss-Legendre"
+        },
+        step.stages,
+        step.steps,
+        step.newton
     );
     Ok((rhs, value, None, how))
 }

@@ -75,7 +75,7 @@ pub struct Function {
     pub outputs: Vec<Target>,
 }
 
-/// An implicit (Gauss-Legendre collocation) step's settings, as in the model.
+/// An implicit (collocation) step's settings, as in the model.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct IrkStep {
     /// Collocation stages (1 to 3).
@@ -84,6 +84,8 @@ pub struct IrkStep {
     pub steps: usize,
     /// Newton iterations per substep.
     pub newton: usize,
+    /// Radau IIA collocation (Gauss-Legendre otherwise).
+    pub radau: bool,
 }
 
 /// A named block of rows (of the residual or of the constraints), for documentation.

@@ -4,7 +4,7 @@ use std::collections::HashMap;
 
 use crate::graph::{Expr, Graph};
 use crate::linalg::{Matrix, Vector};
-use crate::ocp::{Decl, Integrator, OcpBuilder, OcpError, ParamKind, Slack, Stage};
+use crate::ocp::{Collocation, Decl, Integrator, OcpBuilder, OcpError, ParamKind, Slack, Stage};
 
 use super::lexer::{Span, Tok, lex};
 use super::value::{MAX_DIM, Val, call, mul, zip};
@@ -337,34 +337,42 @@ impl<'s, 'g> Parser<'s, 'g> {
         Ok(())
     }
 
-    /// The options of `irk`: nothing, or `(name = count, ...)` with the names `stages`,
-    /// `steps` and `newton`, each at most once, in any order (defaults 2, 1, 3). Their
-    /// ranges are checked by validation, located at the integrator.
+    /// The options of `irk`: nothing, or `(name = value, ...)` with the counts `stages`,
+    /// `steps` and `newton` and `collocation = gauss_legendre | radau_iia`, each at most
+    /// once, in any order (defaults 2, 1, 3, Gauss-Legendre). The counts' ranges are checked
+    /// by validation, located at the integrator.
     fn irk_options(&mut self) -> PResult<Integrator> {
         let (mut stages, mut steps, mut newton) = (None, None, None);
+        let mut collocation = None;
         if self.peek() == Some(&Tok::LParen) {
             self.pos += 1;
             loop {
-                let (key, kspan) = self.ident("`stages`, `steps` or `newton`")?;
-                let slot = match key.as_str() {
-                    "stages" => &mut stages,
-                    "steps" => &mut steps,
-                    "newton" => &mut newton,
+                let (key, kspan) = self.ident("`stages`, `steps`, `newton` or `collocation`")?;
+                let given = match key.as_str() {
+                    "stages" => stages.is_some(),
+                    "steps" => steps.is_some(),
+                    "newton" => newton.is_some(),
+                    "collocation" => collocation.is_some(),
                     other => {
                         return Err(syntax(
                             kspan,
                             format!(
                                 "unknown irk option `{other}`: the options are `stages`, \
-                                 `steps` and `newton`"
+                                 `steps`, `newton` and `collocation`"
                             ),
                         ));
                     }
                 };
-                if slot.is_some() {
+                if given {
                     return Err(semantic(kspan, format!("irk option `{key}` given twice")));
                 }
                 self.expect(&Tok::Eq, "`=`")?;
-                *slot = Some(self.count(&format!("irk `{key}`"))?);
+                match key.as_str() {
+                    "collocation" => collocation = Some(self.collocation()?),
+                    "stages" => stages = Some(self.count("irk `stages`")?),
+                    "steps" => steps = Some(self.count("irk `steps`")?),
+                    _ => newton = Some(self.count("irk `newton`")?),
+                }
                 if self.peek() != Some(&Tok::Comma) {
                     break;
                 }
@@ -376,7 +384,21 @@ impl<'s, 'g> Parser<'s, 'g> {
             stages: stages.unwrap_or(2),
             steps: steps.unwrap_or(1),
             newton: newton.unwrap_or(3),
+            collocation: collocation.unwrap_or_default(),
         })
+    }
+
+    /// `gauss_legendre` or `radau_iia`.
+    fn collocation(&mut self) -> PResult<Collocation> {
+        let (name, span) = self.ident("`gauss_legendre` or `radau_iia`")?;
+        match name.as_str() {
+            "gauss_legendre" => Ok(Collocation::GaussLegendre),
+            "radau_iia" => Ok(Collocation::RadauIia),
+            other => Err(syntax(
+                span,
+                format!("unknown collocation `{other}`: use `gauss_legendre` or `radau_iia`"),
+            )),
+        }
     }
 
     fn count(&mut self, what: &str) -> PResult<usize> {

@@ -91,11 +91,11 @@ pub enum Integrator {
     },
     /// Explicit Euler, one step (for tests).
     Euler,
-    /// Implicit Runge-Kutta: Gauss-Legendre collocation with `stages` stages (order
-    /// `2 * stages`, A-stable), `steps` equal substeps per interval, and a fixed number of
-    /// `newton` iterations per substep (as acados' IRK: `sim_method_num_stages`,
-    /// `sim_method_num_steps`, `sim_method_newton_iter`). The step has no closed-form
-    /// expression: code generators emit a Newton solve ([`Ocp::discrete_map`] refuses it).
+    /// Implicit Runge-Kutta: collocation with `stages` stages ([`Collocation`]), `steps`
+    /// equal substeps per interval, and a fixed number of `newton` iterations per substep (as
+    /// acados' IRK: `sim_method_num_stages`, `sim_method_num_steps`,
+    /// `sim_method_newton_iter`, `collocation_type`). The step has no closed-form expression:
+    /// code generators emit a Newton solve ([`Ocp::discrete_map`] refuses it).
     Irk {
         /// Collocation stages, [`Integrator::IRK_MAX_STAGES`] at most.
         stages: usize,
@@ -103,11 +103,24 @@ pub enum Integrator {
         steps: usize,
         /// Newton iterations per substep (at least 1).
         newton: usize,
+        /// The collocation points.
+        collocation: Collocation,
     },
 }
 
+/// The collocation points of an [`Integrator::Irk`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Collocation {
+    /// Gauss-Legendre: order `2 s`, A-stable (acados' default).
+    #[default]
+    GaussLegendre,
+    /// Radau IIA: order `2 s - 1`, L-stable (transients much faster than a step are damped
+    /// out, not only kept bounded).
+    RadauIia,
+}
+
 impl Integrator {
-    /// The most Gauss-Legendre stages an [`Integrator::Irk`] may have.
+    /// The most collocation stages an [`Integrator::Irk`] may have.
     pub const IRK_MAX_STAGES: usize = 3;
 
     /// Gauss-Legendre collocation with `stages` stages, one substep and three Newton
@@ -117,6 +130,7 @@ impl Integrator {
             stages,
             steps: 1,
             newton: 3,
+            collocation: Collocation::GaussLegendre,
         }
     }
 }

@@ -100,8 +100,8 @@ pub enum OcpError {
     ZeroSubsteps,
     /// An `irk` integrator with a number of stages it does not have a tableau for.
     #[error(
-        "integrator irk with {stages} stages: Gauss-Legendre collocation is available with \
-         1, 2 or 3 stages (order 2, 4, 6)"
+        "integrator irk with {stages} stages: collocation is available with 1, 2 or 3 stages \
+         (Gauss-Legendre: order 2, 4, 6; Radau IIA: order 1, 3, 5)"
     )]
     IrkStages {
         /// The stages asked for.
@@ -533,6 +533,7 @@ impl<'g> Checker<'_, 'g> {
                     stages,
                     steps,
                     newton,
+                    ..
                 },
             ..
         } = ocp.dynamics
