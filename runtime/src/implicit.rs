@@ -13,7 +13,7 @@
 //!
 //! - **Newton.** `K` starts at `f(x, u)` in every stage, then `newton` iterations of
 //!   `(dG/dK) dK = -G`, with `dG/dK = I - h A (x) df/dx` evaluated afresh at every iteration
-//!   (exact Newton; acados' IRK keeps it fixed by default) and factorized by a dense LU with
+//!   (exact Newton; acados can reuse it instead) and factorized by a dense LU with
 //!   partial pivoting ([`lu_factor`]) of size `s * nx`. There is no convergence test: the
 //!   number of iterations is fixed, as in acados, so the cost of a step is fixed.
 //! - **Sensitivities.** After the last iteration `f`, `df/dx`, `df/du` are evaluated once more
