@@ -620,13 +620,19 @@ fn describe(ocp: &Ocp<'_>) -> String {
         terms.push("input rate".into());
     }
     let _ = writeln!(o, "  cost        {}", terms.join(", "));
+    let soft_of = |b: &mpc_dsl::ocp::Bounds| match b.soft_entries().len() {
+        0 => String::new(),
+        n => format!(" ({n} soft)"),
+    };
     let _ = writeln!(
         o,
-        "  bounds      x: {} of {} entries, u: {} of {} entries",
+        "  bounds      x: {} of {} entries{}, u: {} of {} entries{}",
         ocp.state_bounds.active().len(),
         ocp.nx(),
+        soft_of(&ocp.state_bounds),
         ocp.control_bounds.active().len(),
-        ocp.nu()
+        ocp.nu(),
+        soft_of(&ocp.control_bounds)
     );
     let soft = ocp.constraints.iter().filter(|k| k.soft.is_some()).count();
     let rows: usize = ocp.constraints.iter().map(|k| k.expr.len()).sum();

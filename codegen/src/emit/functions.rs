@@ -212,11 +212,12 @@ impl Emitter<'_> {
         let Some(f) = &self.l.constraints else {
             return quote!();
         };
+        let ng = self.ng_qp();
         let body = body(
             f,
             self.s,
             &["cx", "cu"],
-            Some(quote!(SVector<Real, NG>)),
+            Some(quote!(SVector<Real, #ng>)),
             uses,
         );
         let doc = doc_lines(&rows_doc(
@@ -230,9 +231,9 @@ impl Emitter<'_> {
                 x: &SVector<Real, NX>,
                 u: &SVector<Real, NU>,
                 p: &SVector<Real, NP>,
-                cx: &mut SMatrix<Real, NG, NX>,
-                cu: &mut SMatrix<Real, NG, NU>,
-            ) -> SVector<Real, NG> {
+                cx: &mut SMatrix<Real, #ng, NX>,
+                cu: &mut SMatrix<Real, #ng, NU>,
+            ) -> SVector<Real, #ng> {
                 #body
             }
         }
@@ -243,7 +244,8 @@ impl Emitter<'_> {
         let Some(f) = &self.l.terminal_constraints else {
             return quote!();
         };
-        let body = body(f, self.s, &["cx"], Some(quote!(SVector<Real, NGN>)), uses);
+        let ngn = self.ngn_qp();
+        let body = body(f, self.s, &["cx"], Some(quote!(SVector<Real, #ngn>)), uses);
         let doc = doc_lines(&rows_doc(
             "Terminal constraints `h_N(x, p)` with `cx = dh_N/dx`.",
             &self.l.terminal_constraint_rows,
@@ -254,8 +256,8 @@ impl Emitter<'_> {
             pub fn terminal_constraints(
                 x: &SVector<Real, NX>,
                 p: &SVector<Real, NP>,
-                cx: &mut SMatrix<Real, NGN, NX>,
-            ) -> SVector<Real, NGN> {
+                cx: &mut SMatrix<Real, #ngn, NX>,
+            ) -> SVector<Real, #ngn> {
                 #body
             }
         }
@@ -268,12 +270,13 @@ impl Emitter<'_> {
         let constant_stage_jacobians = self.l.constant_stage_residual_jacobians;
         let hessian = self.model_dynamics_hessian();
         let constraints = self.model_constraints();
+        let (ng, ngn) = (self.ng_qp(), self.ngn_qp());
         quote! {
             /// The model, as the runtime's solver evaluates it.
             #[derive(Clone, Copy, Debug, Default)]
             pub struct Model;
 
-            impl mpc_runtime::Model<Real, NX, NU, NP, NY, NYN, NG, NGN> for Model {
+            impl mpc_runtime::Model<Real, NX, NU, NP, NY, NYN, #ng, #ngn> for Model {
                 const CONSTANT_RESIDUAL_JACOBIANS: bool = #constant_jacobians;
                 const CONSTANT_STAGE_RESIDUAL_JACOBIANS: bool = #constant_stage_jacobians;
                 #hessian
@@ -349,6 +352,7 @@ impl Emitter<'_> {
 
     /// `Model::constraints` and `Model::terminal_constraints`, those the model has.
     fn model_constraints(&self) -> TokenStream {
+        let (ng, ngn) = (self.ng_qp(), self.ngn_qp());
         let stage = self.l.constraints.as_ref().map(|_| {
             quote! {
                 fn constraints(
@@ -356,9 +360,9 @@ impl Emitter<'_> {
                     x: &SVector<Real, NX>,
                     u: &SVector<Real, NU>,
                     p: &SVector<Real, NP>,
-                    cx: &mut SMatrix<Real, NG, NX>,
-                    cu: &mut SMatrix<Real, NG, NU>,
-                ) -> SVector<Real, NG> {
+                    cx: &mut SMatrix<Real, #ng, NX>,
+                    cu: &mut SMatrix<Real, #ng, NU>,
+                ) -> SVector<Real, #ng> {
                     functions::constraints(x, u, p, cx, cu)
                 }
             }
@@ -369,8 +373,8 @@ impl Emitter<'_> {
                     &self,
                     x: &SVector<Real, NX>,
                     p: &SVector<Real, NP>,
-                    cx: &mut SMatrix<Real, NGN, NX>,
-                ) -> SVector<Real, NGN> {
+                    cx: &mut SMatrix<Real, #ngn, NX>,
+                ) -> SVector<Real, #ngn> {
                     functions::terminal_constraints(x, p, cx)
                 }
             }

@@ -23,7 +23,8 @@
 //!   expressions of parameters inside the residual, so the runtime's own reference is zero.
 //!   Weights may depend on global parameters; they are a separate function of `p`.
 //! - **Constraints**: path and terminal general constraints stacked, with their Jacobians,
-//!   bounds and slack penalties (`0, 0` for a hard row).
+//!   bounds and slack penalties (`0, 0` for a hard row), then the soft box bounds' rows
+//!   (`soft_bounds.rs`: `h = u_j`, `h = x_j` and `h_N = x_j`).
 //!
 //! The steps are in [`lower_with`], in order: the symbols, the dynamics (`dynamics.rs`), the
 //! cost (`cost.rs`), the constraints (`constraints.rs`), the constant data (`data.rs`).
@@ -32,6 +33,9 @@ mod constraints;
 mod cost;
 mod data;
 mod dynamics;
+mod soft_bounds;
+
+pub use soft_bounds::SoftBounds;
 
 use mpc_dsl::ocp::{ParamKind, Stage, Variable};
 use mpc_dsl::{DslError, Expr, Graph, Ocp, Program, Vector};
@@ -222,6 +226,9 @@ pub struct Lowered {
     /// Whether the weights depend on the `u_prev` parameters (then the automatic update after
     /// each feedback re-evaluates them).
     pub weights_use_u_prev: bool,
+    /// The soft state and control bounds, lowered to the last general rows (`ng`, `ngn`,
+    /// the bounds and penalties above count them; the box bounds above do not).
+    pub soft_bounds: SoftBounds,
 }
 
 /// Compiles expressions over the symbols of some arguments into [`Function`]s.
@@ -364,15 +371,22 @@ pub fn lower_with<'g>(ocp: &Ocp<'g>, exact_hessian: bool) -> Result<Lowered, Cod
         }
     };
     let cost = lower_cost(ocp, &v, &b)?;
-    let path = StackedConstraints::of(ocp, Stage::Path);
-    let terminal = StackedConstraints::of(ocp, Stage::Terminal);
+    let mut path = StackedConstraints::of(ocp, Stage::Path);
+    let mut terminal = StackedConstraints::of(ocp, Stage::Terminal);
+    let soft_bounds = soft_bounds::append_soft_bounds(ocp, &mut path, &mut terminal);
     let constraints = (!path.h.is_empty())
         .then(|| b.with_jacobian("constraints", &path.h, "cx", Some("cu")))
         .transpose()?;
     let terminal_constraints = (!terminal.h.is_empty())
         .then(|| b.with_jacobian("terminal constraints", &terminal.h, "cx", None))
         .transpose()?;
-    let (lbx, ubx) = state_bounds(ocp, &v);
+    let (mut lbx, mut ubx) = state_bounds(ocp, &v);
+    soft_bounds::hard_only(&ocp.state_bounds, &mut lbx, &mut ubx);
+    let (mut lbu, mut ubu) = (
+        ocp.control_bounds.lower.clone(),
+        ocp.control_bounds.upper.clone(),
+    );
+    soft_bounds::hard_only(&ocp.control_bounds, &mut lbu, &mut ubu);
     let (x_guess, u_guess) = guesses(ocp);
     let u_prev = u_prev_entries(ocp, &v)?;
     let weights_use_u_prev = (u_prev.as_deref())
@@ -409,8 +423,8 @@ pub fn lower_with<'g>(ocp: &Ocp<'g>, exact_hessian: bool) -> Result<Lowered, Cod
         terminal_constraint_rows: terminal.rows,
         lbx,
         ubx,
-        lbu: ocp.control_bounds.lower.clone(),
-        ubu: ocp.control_bounds.upper.clone(),
+        lbu,
+        ubu,
         lg: path.lower,
         ug: path.upper,
         lgn: terminal.lower,
@@ -429,6 +443,7 @@ pub fn lower_with<'g>(ocp: &Ocp<'g>, exact_hessian: bool) -> Result<Lowered, Cod
             named(&vars, |i| ocp.parameters[i].kind == ParamKind::Stage)
         },
         u_prev,
+        soft_bounds,
     })
 }
 

@@ -6,6 +6,8 @@ use crate::graph::{Expr, Graph};
 use crate::linalg::{Matrix, Vector};
 use crate::ocp::{Collocation, Decl, Integrator, OcpBuilder, OcpError, ParamKind, Slack, Stage};
 
+mod soft;
+
 use super::lexer::{Span, Tok, lex};
 use super::value::{MAX_DIM, Val, call, mul, zip};
 use super::{Diagnostic, DiagnosticKind, Diagnostics, ParseOptions, Parsed, Place, SourceMap};
@@ -829,7 +831,12 @@ impl<'s, 'g> Parser<'s, 'g> {
         self.expect(&Tok::Comma, "`,`")?;
         let (hi, hspan) = self.const_values("the upper bound")?;
         self.expect(&Tok::RBracket, "`]`")?;
-        self.expect(&Tok::Semi, "`;`")?;
+        let soft = if self.eat_kw("soft") {
+            Some(self.box_soft(&name, syms.len())?)
+        } else {
+            None
+        };
+        self.expect(&Tok::Semi, "`;` (or `soft`)")?;
         let n = syms.len();
         let fit = |v: Vec<f64>, span: Span| -> PResult<Vec<f64>> {
             match v.len() {
@@ -855,8 +862,19 @@ impl<'s, 'g> Parser<'s, 'g> {
                 .insert(format!("{what} on `{s}` (lower)"), span.clone());
             self.spans
                 .insert(format!("{what} on `{s}` (upper)"), span.clone());
+            if soft.is_some() {
+                self.spans
+                    .insert(format!("soft {what} on `{s}`"), span.clone());
+                (self.spans).insert(
+                    format!("slack penalty of soft {what} on `{s}`"),
+                    span.clone(),
+                );
+            }
         }
-        self.b.bound_each(&syms, &lo, &hi);
+        match soft {
+            Some(slacks) => self.b.soft_bound_each(&syms, &lo, &hi, &slacks),
+            None => self.b.bound_each(&syms, &lo, &hi),
+        };
         Ok(())
     }
 

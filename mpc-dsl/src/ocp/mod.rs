@@ -20,7 +20,8 @@
 //! - Parameters are [`ParamKind::Stage`] (one value per stage `0..=N`: references) or
 //!   [`ParamKind::Global`] (one value for the whole horizon: masses, weights).
 //! - Box bounds on controls hold on `k < N`; box bounds on states on `1 <= k <= N`.
-//!   Infinite bounds mean "no bound". General constraints `lh <= h(x, u, p) <= uh` hold on
+//!   Infinite bounds mean "no bound". A bound may be soft ([`Bounds::soft`]): its violation
+//!   is penalized like a soft general constraint's. General constraints `lh <= h(x, u, p) <= uh` hold on
 //!   `k < N` ([`Stage::Path`]) or at `N` ([`Stage::Terminal`]); a soft one gets slacks with
 //!   the given L1 and L2 penalties.
 
@@ -254,13 +255,16 @@ pub struct Constraint<'g> {
     pub soft: Option<Slack>,
 }
 
-/// Component-wise box bounds.
+/// Component-wise box bounds, each hard or soft.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Bounds {
     /// Lower bounds, `-inf` where unbounded.
     pub lower: Vec<f64>,
     /// Upper bounds, `+inf` where unbounded.
     pub upper: Vec<f64>,
+    /// Per entry, `Some` for a soft bound with its slack penalties (`l1 s + 1/2 l2 s^2` on
+    /// the violation `s` of either side), `None` for a hard one.
+    pub soft: Vec<Option<Slack>>,
 }
 
 impl Bounds {
@@ -269,7 +273,15 @@ impl Bounds {
         Bounds {
             lower: vec![f64::NEG_INFINITY; n],
             upper: vec![f64::INFINITY; n],
+            soft: vec![None; n],
         }
+    }
+
+    /// The entries whose bound is soft, in order (acados' `idxsbx`/`idxsbu`).
+    pub fn soft_entries(&self) -> Vec<usize> {
+        (self.soft.iter().enumerate())
+            .filter_map(|(i, s)| s.map(|_| i))
+            .collect()
     }
 
     /// Indices with at least one finite side: the bounds a solver must enforce.

@@ -158,6 +158,21 @@ pub enum OcpError {
         /// The value.
         value: f64,
     },
+    /// A soft box bound whose penalties are both zero (it would be a hard bound).
+    #[error(
+        "{item}: soft with l1 = 0 and l2 = 0 penalizes nothing; give a positive penalty, \
+         or drop `soft` for a hard bound"
+    )]
+    ZeroPenalties {
+        /// The bounded entry, e.g. `soft state bound on `v``.
+        item: String,
+    },
+    /// A soft box bound on an entry with no finite bound.
+    #[error("{item}: soft on an entry without a finite bound; give a finite lower or upper bound")]
+    SoftUnbounded {
+        /// The bounded entry.
+        item: String,
+    },
 }
 
 impl OcpError {
@@ -175,6 +190,8 @@ impl OcpError {
             | OcpError::NonFinite { item, .. }
             | OcpError::IllegalDependence { item, .. }
             | OcpError::NegativePenalty { item, .. }
+            | OcpError::ZeroPenalties { item }
+            | OcpError::SoftUnbounded { item }
             | OcpError::NotAVariable { item, .. } => Some(item),
             _ => None,
         }
@@ -618,6 +635,51 @@ impl<'g> Checker<'_, 'g> {
                 nu,
                 "the control",
             );
+        }
+        self.soft_bounds("state", &ocp.state_bounds, &names(&ocp.states));
+        self.soft_bounds("control", &ocp.control_bounds, &names(&ocp.controls));
+    }
+
+    /// The soft entries of state or control bounds (`what`): one slack per entry, finite
+    /// non-negative penalties not both zero, and a finite bound to soften.
+    fn soft_bounds(&mut self, what: &str, b: &Bounds, names: &[String]) {
+        if b.soft.len() != b.lower.len() {
+            self.len(
+                &format!("{what} bound slacks"),
+                b.soft.len(),
+                b.lower.len(),
+                &format!("the {what}"),
+            );
+            return;
+        }
+        for (i, s) in b.soft.iter().enumerate() {
+            let Some(s) = s else { continue };
+            let name = names
+                .get(i)
+                .cloned()
+                .unwrap_or_else(|| format!("entry {i}"));
+            let item = format!("soft {what} bound on `{name}`");
+            for v in [s.l1, s.l2] {
+                if !v.is_finite() {
+                    self.errors.push(OcpError::NonFinite {
+                        item: format!("slack penalty of {item}"),
+                        value: v,
+                    });
+                } else if v < 0.0 {
+                    self.errors.push(OcpError::NegativePenalty {
+                        item: item.clone(),
+                        value: v,
+                    });
+                }
+            }
+            if s.l1 == 0.0 && s.l2 == 0.0 {
+                self.errors
+                    .push(OcpError::ZeroPenalties { item: item.clone() });
+            }
+            let finite = |v: Option<&f64>| v.is_some_and(|v| v.is_finite());
+            if !finite(b.lower.get(i)) && !finite(b.upper.get(i)) {
+                self.errors.push(OcpError::SoftUnbounded { item });
+            }
         }
     }
 
