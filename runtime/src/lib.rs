@@ -24,6 +24,7 @@
 
 use nalgebra::{ArrayStorage, SMatrix};
 
+pub mod implicit;
 mod kernels;
 pub mod model;
 pub mod qp;

@@ -40,6 +40,10 @@ impl Emitter<'_> {
     /// `functions::dynamics`: `F(x, u, p)`, `a = dF/dx`, `b = dF/du`.
     fn dynamics_fn(&self, uses: &mut Uses) -> TokenStream {
         let l = self.l;
+        if let Some(irk) = &l.irk {
+            // `ode`, the step's settings, `dynamics` and `dynamics_value` (`implicit.rs`).
+            return self.irk_fns(irk, uses);
+        }
         let body = body(
             &l.dynamics,
             self.s,
@@ -81,6 +85,10 @@ impl Emitter<'_> {
 
     /// `functions::dynamics_value`: `F(x, u, p)` alone.
     fn dynamics_value_fn(&self, uses: &mut Uses) -> TokenStream {
+        if self.l.irk.is_some() {
+            // Emitted with `dynamics` by `irk_fns`.
+            return quote!();
+        }
         let body = body(
             &self.l.dynamics_value,
             self.s,

@@ -13,6 +13,7 @@ mod c_abi;
 mod c_run_time;
 mod constants;
 mod functions;
+mod implicit;
 mod run_time;
 mod setters;
 mod soft_bounds;

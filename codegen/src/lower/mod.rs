@@ -44,7 +44,7 @@ use crate::error::CodegenError;
 use constraints::StackedConstraints;
 use cost::{lower_cost, weights_read_u_prev};
 use data::{guesses, named, state_bounds, u_prev_entries};
-use dynamics::{discretize, dynamics_functions, dynamics_hessian};
+use dynamics::{discretize, dynamics_functions, dynamics_hessian, irk_functions, irk_of};
 
 /// Which argument of a model function an input is.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -77,6 +77,19 @@ pub struct Function {
     pub inputs: Vec<(Arg, usize)>,
     /// Where each program output goes.
     pub outputs: Vec<Target>,
+}
+
+/// An implicit (collocation) step's settings, as in the model.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct IrkStep {
+    /// Collocation stages (1 to 3).
+    pub stages: usize,
+    /// Substeps per interval.
+    pub steps: usize,
+    /// Newton iterations per substep.
+    pub newton: usize,
+    /// Radau IIA collocation (Gauss-Legendre otherwise).
+    pub radau: bool,
 }
 
 /// A named block of rows (of the residual or of the constraints), for documentation.
@@ -136,10 +149,15 @@ pub struct Lowered {
     pub dt: f64,
     /// How the dynamics are discretized, in words.
     pub discretization: String,
-    /// `F`, `A`, `B`.
+    /// `F`, `A`, `B`; with [`irk`](Self::irk), the ODE's right-hand side instead:
+    /// `f(x, u, p)` over the model's states with `fx = df/dx`, `fu = df/du`, which the
+    /// emitted implicit step evaluates at its stage points.
     pub dynamics: Function,
-    /// `F` alone.
+    /// `F` alone; with [`irk`](Self::irk), `f(x, u, p)` alone.
     pub dynamics_value: Function,
+    /// The implicit integrator's settings, when the model integrates with `irk`: the step is
+    /// then emitted as a call of `mpc_runtime::implicit` around [`dynamics`](Self::dynamics).
+    pub irk: Option<IrkStep>,
     /// The Hessian of `pi' F(x, u, p)` over `(x, u)`, as `hxx`, `hux`, `huu` (with
     /// [`lower_with`]'s `exact_hessian`).
     pub dynamics_hessian: Option<Function>,
@@ -337,12 +355,20 @@ pub fn lower_with<'g>(ocp: &Ocp<'g>, exact_hessian: bool) -> Result<Lowered, Cod
     ocp.validate().map_err(CodegenError::Invalid)?;
     let v = Symbols::new(ocp, exact_hessian)?;
     let b = v.builder();
-    let map = discretize(ocp, &v)?;
-    let (dynamics, dynamics_value) = dynamics_functions(ocp, &v, &b, &map)?;
-    let dynamics_hessian = if exact_hessian {
-        Some(dynamics_hessian(&v, &b, &map.x_next)?)
-    } else {
-        None
+    let irk = irk_of(ocp);
+    let (dynamics, dynamics_value, dynamics_hessian, discretization) = match irk {
+        Some(_) if exact_hessian => return Err(CodegenError::ExactHessianWithIrk),
+        Some(step) => irk_functions(ocp, &v, step)?,
+        None => {
+            let map = discretize(ocp, &v)?;
+            let (dynamics, dynamics_value) = dynamics_functions(ocp, &v, &b, &map)?;
+            let hessian = if exact_hessian {
+                Some(dynamics_hessian(&v, &b, &map.x_next)?)
+            } else {
+                None
+            };
+            (dynamics, dynamics_value, hessian, map.how)
+        }
     };
     let cost = lower_cost(ocp, &v, &b)?;
     let mut path = StackedConstraints::of(ocp, Stage::Path);
@@ -379,9 +405,10 @@ pub fn lower_with<'g>(ocp: &Ocp<'g>, exact_hessian: bool) -> Result<Lowered, Cod
         ngn: terminal.h.len(),
         n: ocp.horizon.n,
         dt: ocp.horizon.dt,
-        discretization: map.how,
+        discretization,
         dynamics,
         dynamics_value,
+        irk,
         dynamics_hessian,
         residual: cost.residual,
         terminal_residual: cost.terminal_residual,

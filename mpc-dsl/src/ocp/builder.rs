@@ -188,7 +188,12 @@ impl<'g> OcpBuilder<'g> {
         self.param(decl, ParamKind::Global)
     }
 
-    /// Continuous dynamics `xdot = f(x, u, p)`, one expression per state entry.
+    /// Continuous dynamics `xdot = f(x, u, p)`, one expression per state entry, discretized
+    /// by `integrator`: [`Integrator::Rk4`], or for stiff dynamics the implicit
+    /// [`Integrator::Irk`] (e.g. [`Integrator::gauss_legendre`]`(2)`). Its settings are checked
+    /// by [`build`](Self::build): [`OcpError::IrkStages`] for stages outside 1..=3,
+    /// [`OcpError::IrkZero`] for zero substeps or Newton iterations (from a `.mpc` file,
+    /// located at the integrator).
     pub fn ode(&mut self, xdot: &[Expr<'g>], integrator: Integrator) -> &mut Self {
         self.set_dynamics(Dynamics::Continuous {
             xdot: xdot.iter().copied().collect(),

@@ -92,6 +92,48 @@ pub enum Integrator {
     },
     /// Explicit Euler, one step (for tests).
     Euler,
+    /// Implicit Runge-Kutta: collocation with `stages` stages ([`Collocation`]), `steps`
+    /// equal substeps per interval, and a fixed number of `newton` iterations per substep (as
+    /// acados' IRK: `sim_method_num_stages`, `sim_method_num_steps`,
+    /// `sim_method_newton_iter`, `collocation_type`). The step has no closed-form expression:
+    /// code generators emit a Newton solve ([`Ocp::discrete_map`] refuses it).
+    Irk {
+        /// Collocation stages, [`Integrator::IRK_MAX_STAGES`] at most.
+        stages: usize,
+        /// Substeps per interval (at least 1).
+        steps: usize,
+        /// Newton iterations per substep (at least 1).
+        newton: usize,
+        /// The collocation points.
+        collocation: Collocation,
+    },
+}
+
+/// The collocation points of an [`Integrator::Irk`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Collocation {
+    /// Gauss-Legendre: order `2 s`, A-stable (acados' default).
+    #[default]
+    GaussLegendre,
+    /// Radau IIA: order `2 s - 1`, L-stable (transients much faster than a step are damped
+    /// out, not only kept bounded).
+    RadauIia,
+}
+
+impl Integrator {
+    /// The most collocation stages an [`Integrator::Irk`] may have.
+    pub const IRK_MAX_STAGES: usize = 3;
+
+    /// Gauss-Legendre collocation with `stages` stages, one substep and three Newton
+    /// iterations (acados' defaults for `sim_method_num_steps` and `sim_method_newton_iter`).
+    pub fn gauss_legendre(stages: usize) -> Integrator {
+        Integrator::Irk {
+            stages,
+            steps: 1,
+            newton: 3,
+            collocation: Collocation::GaussLegendre,
+        }
+    }
 }
 
 /// The dynamics.
@@ -473,7 +515,8 @@ impl<'g> Ocp<'g> {
     ///
     /// # Errors
     /// [`DslError::DimensionMismatch`](crate::DslError::DimensionMismatch) if the dynamics
-    /// do not have one entry per state (validation reports that first).
+    /// do not have one entry per state (validation reports that first);
+    /// [`DslError::NoClosedForm`](crate::DslError::NoClosedForm) for [`Integrator::Irk`].
     pub fn discrete_map(&self) -> crate::Result<Vector<'g>> {
         let x = self.x();
         let f = self.dynamics.exprs();
@@ -495,6 +538,12 @@ impl<'g> Ocp<'g> {
                 integrator: Integrator::Rk4 { steps },
                 ..
             } => crate::models::rk4(&x, self.horizon.dt, steps, rhs),
+            Dynamics::Continuous {
+                integrator: Integrator::Irk { .. },
+                ..
+            } => Err(crate::DslError::NoClosedForm {
+                what: "the discrete map of an irk (implicit) integrator",
+            }),
         }
     }
 }

@@ -98,6 +98,21 @@ pub enum OcpError {
     /// RK4 with zero substeps.
     #[error("integrator rk4 with 0 substeps: use at least 1")]
     ZeroSubsteps,
+    /// An `irk` integrator with a number of stages it does not have a tableau for.
+    #[error(
+        "integrator irk with {stages} stages: collocation is available with 1, 2 or 3 stages \
+         (Gauss-Legendre: order 2, 4, 6; Radau IIA: order 1, 3, 5)"
+    )]
+    IrkStages {
+        /// The stages asked for.
+        stages: usize,
+    },
+    /// An `irk` integrator with zero substeps or zero Newton iterations.
+    #[error("integrator irk with 0 {what}: use at least 1")]
+    IrkZero {
+        /// `substeps` or `Newton iterations`.
+        what: &'static str,
+    },
     /// Something required is missing.
     #[error("no {what} given: the problem needs one")]
     Missing {
@@ -528,6 +543,29 @@ impl<'g> Checker<'_, 'g> {
         } = ocp.dynamics
         {
             self.errors.push(OcpError::ZeroSubsteps);
+        }
+        if let Dynamics::Continuous {
+            integrator:
+                Integrator::Irk {
+                    stages,
+                    steps,
+                    newton,
+                    ..
+                },
+            ..
+        } = ocp.dynamics
+        {
+            if !(1..=Integrator::IRK_MAX_STAGES).contains(&stages) {
+                self.errors.push(OcpError::IrkStages { stages });
+            }
+            if steps == 0 {
+                self.errors.push(OcpError::IrkZero { what: "substeps" });
+            }
+            if newton == 0 {
+                self.errors.push(OcpError::IrkZero {
+                    what: "Newton iterations",
+                });
+            }
         }
         if self.len("the dynamics", dyn_exprs.len(), ocp.nx(), "the state") {
             self.exprs("the dynamics", dyn_exprs, &PATH_ROLES, "");
