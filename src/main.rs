@@ -557,6 +557,23 @@ fn describe(ocp: &Ocp<'_>) -> String {
             integrator: Integrator::Euler,
             ..
         } => "ode, explicit euler".into(),
+        Dynamics::Continuous {
+            integrator:
+                Integrator::Irk {
+                    stages,
+                    steps,
+                    newton,
+                    collocation,
+                },
+            ..
+        } => format!(
+            "ode, irk ({}) with {stages} stage(s), {steps} substep(s), {newton} Newton \
+             iteration(s)",
+            match collocation {
+                mpc_dsl::ocp::Collocation::GaussLegendre => "Gauss-Legendre",
+                mpc_dsl::ocp::Collocation::RadauIia => "Radau IIA",
+            }
+        ),
         Dynamics::Discrete { .. } => "discrete map".into(),
     };
     let params = ocp
@@ -611,13 +628,19 @@ fn describe(ocp: &Ocp<'_>) -> String {
         terms.push(format!("{at} {} (general)", t.name));
     }
     let _ = writeln!(o, "  cost        {}", terms.join(", "));
+    let soft_of = |b: &mpc_dsl::ocp::Bounds| match b.soft_entries().len() {
+        0 => String::new(),
+        n => format!(" ({n} soft)"),
+    };
     let _ = writeln!(
         o,
-        "  bounds      x: {} of {} entries, u: {} of {} entries",
+        "  bounds      x: {} of {} entries{}, u: {} of {} entries{}",
         ocp.state_bounds.active().len(),
         ocp.nx(),
+        soft_of(&ocp.state_bounds),
         ocp.control_bounds.active().len(),
-        ocp.nu()
+        ocp.nu(),
+        soft_of(&ocp.control_bounds)
     );
     let soft = ocp.constraints.iter().filter(|k| k.soft.is_some()).count();
     let rows: usize = ocp.constraints.iter().map(|k| k.expr.len()).sum();
@@ -646,7 +669,34 @@ fn expressions(g: &Graph, ocp: &Ocp<'_>) -> mpc_dsl::Result<String> {
         tree_ops(f),
         prog.instrs().len()
     );
-    let fd = ocp.discrete_map()?;
+    let mut wrt: Vec<Expr<'_>> = x.to_vec();
+    wrt.extend(u.iter().copied());
+    let jac = g.jacobian(f, &wrt)?;
+    let names: Vec<String> = x.iter().map(ToString::to_string).collect();
+    let cols: Vec<String> = wrt.iter().map(ToString::to_string).collect();
+    let df_pattern = |o: &mut String| {
+        let _ = writeln!(
+            o,
+            "jacobian df/d(x,u): {}x{}, {} structural nonzeros",
+            jac.nrows(),
+            jac.ncols(),
+            jac.nnz()
+        );
+        let _ = writeln!(o, "    columns: {}", cols.join(" "));
+        o.push_str(&pattern(jac.sparsity(), &names, wrt.len()));
+    };
+    let fd = match ocp.discrete_map() {
+        Err(mpc_dsl::DslError::NoClosedForm { .. }) => {
+            let _ = writeln!(
+                o,
+                "discrete map F(x,u,p) over dt: implicit (irk), solved by Newton iterations \
+                 in the generated code; [A B] by the implicit function theorem"
+            );
+            df_pattern(&mut o);
+            return Ok(o);
+        }
+        other => other?,
+    };
     let prog_d = g.compile(&fd, &inputs)?;
     let _ = writeln!(
         o,
@@ -654,22 +704,9 @@ fn expressions(g: &Graph, ocp: &Ocp<'_>) -> mpc_dsl::Result<String> {
         tree_ops(&fd),
         prog_d.instrs().len()
     );
-    let mut wrt: Vec<Expr<'_>> = x.to_vec();
-    wrt.extend(u.iter().copied());
-    let jac = g.jacobian(f, &wrt)?;
     let jac_d = g.jacobian(&fd, &wrt)?;
     let prog_j = g.compile(jac_d.values(), &inputs)?;
-    let names: Vec<String> = x.iter().map(ToString::to_string).collect();
-    let cols: Vec<String> = wrt.iter().map(ToString::to_string).collect();
-    let _ = writeln!(
-        o,
-        "jacobian df/d(x,u): {}x{}, {} structural nonzeros",
-        jac.nrows(),
-        jac.ncols(),
-        jac.nnz()
-    );
-    let _ = writeln!(o, "    columns: {}", cols.join(" "));
-    o.push_str(&pattern(jac.sparsity(), &names, wrt.len()));
+    df_pattern(&mut o);
     let _ = writeln!(
         o,
         "jacobian [A B] = dF/d(x,u): {}x{}, {} structural nonzeros, {} instructions after CSE",

@@ -52,3 +52,30 @@ fn check_rejects_a_bad_file_with_a_caret() {
     assert!(!ok);
     assert!(err.contains("cannot read"), "{err}");
 }
+
+#[test]
+fn check_describes_an_implicit_integrator_and_locates_its_errors() {
+    let (ok, out, err) = mpcc(&["check", "models/stiff_actuator.mpc"]);
+    assert!(ok, "{err}");
+    assert!(
+        out.contains("irk (Gauss-Legendre) with 2 stage(s), 4 substep(s), 3 Newton iteration(s)"),
+        "{out}"
+    );
+    assert!(
+        out.contains("discrete map F(x,u,p) over dt: implicit (irk)"),
+        "{out}"
+    );
+    assert!(out.contains("jacobian df/d(x,u): 3x4"), "{out}");
+    let dir = env!("CARGO_TARGET_TMPDIR");
+    let path = format!("{dir}/bad_irk.mpc");
+    std::fs::write(
+        &path,
+        "model bad;\nstate x;\ncontrol u;\ndynamics ode irk(stages = 5) { der(x) = u; }\n\
+         horizon N = 5, dt = 0.1;\ncost { Q = diag(1); R = diag(1); }\n",
+    )
+    .unwrap();
+    let (ok, out, err) = mpcc(&["check", &path]);
+    assert!(!ok, "{out}");
+    assert!(err.contains("irk with 5 stages"), "{err}");
+    assert!(err.contains("bad_irk.mpc:4:14"), "{err}");
+}

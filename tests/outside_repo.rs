@@ -3,7 +3,9 @@
 //! built from the same sources with models, templates and the runtime's source embedded, only
 //! in another profile), a generated crate with the runtime vendored built offline for the host
 //! and for a bare-metal target and again after being moved, and a crate with the default
-//! versioned dependency built against `mpc-runtime` as `cargo package` packs it.
+//! versioned dependency built against `mpc-runtime` as `cargo package` packs it, and a fresh
+//! project that has only the three packed library crates generates a solver in its
+//! `build.rs`, builds and runs it.
 //!
 //! The builds are offline: nalgebra and libm are in cargo's cache from this workspace's build.
 
@@ -203,3 +205,69 @@ fn a_versioned_crate_builds_against_the_packaged_runtime() {
     assert!(built.contains("Compiling paper_pointmass"), "{built}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// What a user without this repository has: the three library crates as `cargo package`
+/// packs them (what a registry would serve). A fresh project generates a solver from its own
+/// `.mpc` file in `build.rs` with the packaged generator, builds it against the packaged
+/// runtime and runs it; its first control is the one of this repository's checked-in crate
+/// generated from the same model (`generated/paper_pointmass`).
+#[test]
+fn a_fresh_project_generates_builds_and_runs_a_solver_from_the_packaged_crates() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    cargo_in(
+        root,
+        &[
+            "package",
+            "-p",
+            "mpc-dsl",
+            "-p",
+            "mpc-runtime",
+            "-p",
+            "mpc-codegen",
+            "--allow-dirty",
+        ],
+    );
+    let version = mpc_codegen::vendor::RUNTIME_VERSION;
+    let packed = |name: &str| target_dir().join(format!("package/{name}-{version}"));
+    let dir = scratch("fresh");
+    std::fs::create_dir_all(dir.join("src")).unwrap();
+    std::fs::write(dir.join("pointmass.mpc"), MODEL).unwrap();
+    let mut toml = format!(
+        "[package]\nname = \"fresh\"\nversion = \"0.1.0\"\nedition = \"2024\"\n\n\
+         [dependencies]\nmpc-runtime = \"{version}\"\n\n\
+         [build-dependencies]\nmpc-codegen = \"{version}\"\n\n[patch.crates-io]\n"
+    );
+    for name in ["mpc-dsl", "mpc-runtime", "mpc-codegen"] {
+        let path = packed(name);
+        assert!(path.join("Cargo.toml").is_file(), "{name} not packaged");
+        toml += &format!("{name} = {{ path = {:?} }}\n", path.to_str().unwrap());
+    }
+    std::fs::write(dir.join("Cargo.toml"), toml).unwrap();
+    std::fs::write(
+        dir.join("build.rs"),
+        "fn main() {\n    mpc_codegen::Builder::new(\"pointmass.mpc\")\n        .module(\"solver\")\n        \
+         .build()\n        .unwrap_or_else(|e| panic!(\"{e}\"));\n}\n",
+    )
+    .unwrap();
+    std::fs::write(dir.join("src/main.rs"), FRESH_MAIN).unwrap();
+    let ran = cargo_in(&dir, &["run", "-q"]);
+
+    let mut s = paper_pointmass::Solver::new();
+    s.prepare();
+    s.set_x0(&FRESH_X0).unwrap();
+    let info = s.feedback();
+    let want = format!("{:?} {:?}", info.status, s.u0());
+    assert!(
+        ran.contains(&want),
+        "fresh project: {ran}\nthis repository's crate: {want}"
+    );
+    assert!(ran.contains("Ok ["), "{ran}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+const FRESH_X0: [f64; 9] = [1.0, -0.5, 0.2, 0.0, 0.3, 0.0, 0.0, 0.0, 0.0];
+
+const FRESH_MAIN: &str = "mpc_runtime::include_solver!(\"solver\");\n\n\
+fn main() {\n    let mut s = solver::Solver::new();\n    s.prepare();\n    \
+s.set_x0(&[1.0, -0.5, 0.2, 0.0, 0.3, 0.0, 0.0, 0.0, 0.0]).unwrap();\n    \
+let info = s.feedback();\n    println!(\"{:?} {:?}\", info.status, s.u0());\n}\n";

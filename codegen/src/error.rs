@@ -24,6 +24,14 @@ pub enum CodegenError {
         /// What it may use.
         allowed: String,
     },
+    /// The exact Hessian was asked for a model integrated by `irk`: the implicit step
+    /// provides first-order sensitivities only.
+    #[error(
+        "the exact Hessian (`exact_hessian`, `--exact-hessian`) needs the second derivatives \
+         of the integrator step, which the implicit `irk` integrator does not provide: \
+         generate without the exact Hessian (Gauss-Newton), or integrate with `rk4(k)`"
+    )]
+    ExactHessianWithIrk,
     /// A feature of the model the generator does not handle.
     #[error("not supported by the code generator: {0}")]
     Unsupported(String),

@@ -328,9 +328,15 @@ fn header(l: &Lowered, name: &str, stamp: &str, opts: &Options) -> Result<String
     c.insert("nx_model", &l.nx_model);
     c.insert("nu", &l.nu);
     c.insert("np", &l.np);
-    c.insert("ng", &l.ng);
     c.insert("general_cost", &l.general_cost.is_some());
-    c.insert("ngn", &l.ngn);
+    c.insert("ng", &l.soft_bounds.ng_model);
+    c.insert("ngn", &l.soft_bounds.ngn_model);
+    let sb = &l.soft_bounds;
+    c.insert("soft", &!sb.is_empty());
+    c.insert("nsbu", &sb.controls.len());
+    c.insert("nsbx", &sb.states.len());
+    c.insert("soft_u", &format!("{:?}", sb.controls));
+    c.insert("soft_x", &format!("{:?}", sb.states));
     c.insert("nbx", &emit::state_bound_rows(l));
     let vals = |v: &[lower::Named]| tera::Value::Array(v.iter().map(var_value).collect());
     c.insert("states", &vals(&l.states));

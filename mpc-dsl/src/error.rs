@@ -79,6 +79,18 @@ pub enum DslError {
         /// Given length.
         found: usize,
     },
+
+    /// An expression was asked of something that has none: the step of an implicit
+    /// integrator is the solution of a nonlinear system, found by Newton iterations in
+    /// generated code.
+    #[error(
+        "{what} has no closed-form expression: it is solved by Newton iterations in the \
+         generated code; evaluate the generated dynamics instead"
+    )]
+    NoClosedForm {
+        /// What was asked for.
+        what: &'static str,
+    },
 }
 
 /// Result type of this crate.

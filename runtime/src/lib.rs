@@ -25,6 +25,7 @@
 use nalgebra::{ArrayStorage, SMatrix};
 
 pub mod convexify;
+pub mod implicit;
 mod kernels;
 pub mod model;
 pub mod qp;

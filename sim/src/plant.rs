@@ -46,13 +46,14 @@
 //! # Tethered probe
 //!
 //! A probe ([`crate::probe`]) can hang from the centre of gravity on a rigid link
-//! ([`Plant::attach_probe`]). While attached, its two swing angles and rates are integrated
-//! with the vehicle in the same RK4 step (21 states) and the link tension `lambda n` acts on
+//! ([`Plant::attach_probe`]). While attached, its link direction `n` and rate `n'` are
+//! integrated with the vehicle in the same RK4 step (23 states; not the swing angles, which
+//! are singular at `|beta| = pi/2`) and the link tension `lambda n` acts on
 //! the vehicle: `v' = (F + lambda n) / m - g e_z` with `F` the force above, and the
 //! accelerometer ([`Plant::specific_acceleration`]) measures `(F + lambda n) / m`. The
 //! attitude, rate and rotor dynamics are unchanged (free pivot). Lift-off needs the total
-//! weight `(m + mp) g`; while the vehicle is held on the ground the swing angles are held and
-//! the swing rates are zero. After [`Plant::release_probe`] the probe flies ballistically,
+//! weight `(m + mp) g`; while the vehicle is held on the ground the link direction is held and
+//! its rate is zero. After [`Plant::release_probe`] the probe flies ballistically,
 //! independent of the vehicle, and lands on `z = 0`. With a probe of zero mass (or none) the
 //! vehicle's motion is bit-identical to the plant without a probe.
 
@@ -60,7 +61,10 @@ use nalgebra::{Quaternion, SVector, UnitQuaternion, Vector3};
 
 pub use mpc_mission::vehicle::{QuadParams, QuadState, RotorLag};
 
-use crate::probe::{CoupledAcceleration, Probe, ProbeParams, Release, coupled_acceleration};
+use crate::probe::{
+    CoupledAcceleration, Probe, ProbeParams, Release, coupled_acceleration,
+    coupled_link_acceleration,
+};
 
 /// Touchdown vertical speed (m/s, downward) above which an impact is a crash.
 pub const MAX_TOUCHDOWN_VERTICAL_SPEED: f64 = 1.5;
@@ -144,8 +148,10 @@ enum Mode {
 }
 
 type Vec17 = SVector<f64, 17>;
-/// The vehicle's 17 states followed by `alpha, beta, alpha', beta'` of an attached probe.
-type Vec21 = SVector<f64, 21>;
+/// The vehicle's 17 states followed by the link direction `n` and its rate `n'` of an
+/// attached probe (not the swing angles, which are singular at `|beta| = pi/2`:
+/// [`crate::probe`]).
+type Vec23 = SVector<f64, 23>;
 
 /// The simulated quadrotor.
 #[derive(Clone, Debug)]
@@ -185,7 +191,7 @@ impl Plant {
 
     /// Replaces the state (clearing any crash), with the same ground rule as [`Plant::new`].
     /// A non-finite state is a [`CrashReason::NonFinite`] crash. An attached probe keeps its
-    /// swing angles (and rates, unless the new state is on the ground).
+    /// link direction (and its rate, unless the new state is on the ground).
     pub fn set_state(&mut self, s: QuadState) {
         if !s.is_finite() {
             let c = Contact::Crash {
@@ -265,7 +271,8 @@ impl Plant {
         }
         self.attached_probe().map(|p| {
             let f = self.nongravity_force(&self.state, &self.last_dist);
-            self.coupled(&f, p.params(), p.ang(), p.dang()).tension
+            self.coupled_link(&f, p.params(), &p.link_direction(), &p.link_rate())
+                .2
         })
     }
 
@@ -304,11 +311,23 @@ impl Plant {
         coupled_acceleration(f, self.params.mass, self.params.g, pp, ang, dang)
     }
 
+    /// The same in the plant's coordinates, the link direction `n` and its rate `nd`:
+    /// (vehicle acceleration, `n''`, tension).
+    fn coupled_link(
+        &self,
+        f: &Vector3<f64>,
+        pp: &ProbeParams,
+        n: &Vector3<f64>,
+        nd: &Vector3<f64>,
+    ) -> (Vector3<f64>, Vector3<f64>, f64) {
+        coupled_link_acceleration(f, self.params.mass, self.params.g, pp, n, nd)
+    }
+
     /// Holds an attached probe with the grounded vehicle: swing rates zero.
     fn hold_probe(&mut self) {
         if let Some(p) = self.probe.as_mut().filter(|p| p.is_attached()) {
-            let ang = p.ang();
-            p.set_swing(ang, [0.0; 2]);
+            let n = p.link_direction();
+            p.set_link(n, Vector3::zeros());
         }
     }
 
@@ -357,8 +376,8 @@ impl Plant {
                     && p.params().mass != 0.0
                 {
                     let tension = self
-                        .coupled(&f_world, p.params(), p.ang(), p.dang())
-                        .tension;
+                        .coupled_link(&f_world, p.params(), &p.link_direction(), &p.link_rate())
+                        .2;
                     f_world += p.link_direction() * tension;
                 }
                 s.q.inverse_transform_vector(&f_world) / self.params.mass
@@ -412,17 +431,20 @@ impl Plant {
         };
 
         let lag = self.params.rotor_lag;
-        // Swing angles to hold if the vehicle stays on the ground.
-        let held_ang = self.attached_probe().map(|p| p.ang());
+        // The link direction to hold if the vehicle stays on the ground.
+        let held_n = self.attached_probe().map(|p| p.link_direction());
         let mut probe = self.probe.clone();
         let mut new = match probe.as_mut().filter(|p| p.is_attached()) {
             Some(p) => {
                 let x0 = pack_attached(&old, p, lag);
                 let pp = *p.params();
-                let x1 = rk4(&x0, dt, |x: &Vec21| {
+                let x1 = rk4(&x0, dt, |x: &Vec23| {
                     self.derivative_attached(x, &cmd, dist, &pp)
                 });
-                p.set_swing([x1[17], x1[18]], [x1[19], x1[20]]);
+                p.set_link(
+                    x1.fixed_rows::<3>(17).into_owned(),
+                    x1.fixed_rows::<3>(20).into_owned(),
+                );
                 unpack(&x1.fixed_rows::<17>(0).into_owned(), lag)
             }
             None => {
@@ -450,8 +472,8 @@ impl Plant {
             self.state = held;
             self.mode = Mode::OnGround;
             self.last = Contact::OnGround;
-            if let (Some(p), Some(ang)) = (self.probe.as_mut(), held_ang) {
-                p.set_swing(ang, [0.0; 2]);
+            if let (Some(p), Some(n)) = (self.probe.as_mut(), held_n) {
+                p.set_link(n, Vector3::zeros());
             }
             self.note_probe_strike();
             return self.last;
@@ -529,23 +551,22 @@ impl Plant {
     /// `pp`).
     fn derivative_attached(
         &self,
-        x: &Vec21,
+        x: &Vec23,
         cmd: &[f64; 4],
         dist: &Disturbance,
         pp: &ProbeParams,
-    ) -> Vec21 {
+    ) -> Vec23 {
         let xv: Vec17 = x.fixed_rows::<17>(0).into_owned();
         let s = unpack(&xv, self.params.rotor_lag);
-        let (ang, dang) = ([x[17], x[18]], [x[19], x[20]]);
+        let n: Vector3<f64> = x.fixed_rows::<3>(17).into_owned();
+        let nd: Vector3<f64> = x.fixed_rows::<3>(20).into_owned();
         let f = self.nongravity_force(&s, dist);
-        let acc = self.coupled(&f, pp, ang, dang);
-        let dv = self.rigid_derivative(&xv, &s, cmd, dist, &acc.vehicle);
-        let mut d = Vec21::zeros();
+        let (vehicle, ndd, _) = self.coupled_link(&f, pp, &n, &nd);
+        let dv = self.rigid_derivative(&xv, &s, cmd, dist, &vehicle);
+        let mut d = Vec23::zeros();
         d.fixed_rows_mut::<17>(0).copy_from(&dv);
-        d[17] = dang[0];
-        d[18] = dang[1];
-        d[19] = acc.swing[0];
-        d[20] = acc.swing[1];
+        d.fixed_rows_mut::<3>(17).copy_from(&nd);
+        d.fixed_rows_mut::<3>(20).copy_from(&ndd);
         d
     }
 
@@ -616,15 +637,12 @@ fn rk4<const N: usize>(
     x0 + (k1 + k2 * 2.0 + k3 * 2.0 + k4) * (dt / 6.0)
 }
 
-/// The vehicle state `s` followed by the swing state of the attached probe `p`.
-fn pack_attached(s: &QuadState, p: &Probe, lag: RotorLag) -> Vec21 {
-    let mut x = Vec21::zeros();
+/// The vehicle state `s` followed by the link state of the attached probe `p`.
+fn pack_attached(s: &QuadState, p: &Probe, lag: RotorLag) -> Vec23 {
+    let mut x = Vec23::zeros();
     x.fixed_rows_mut::<17>(0).copy_from(&pack(s, lag));
-    let ([a, b], [da, db]) = (p.ang(), p.dang());
-    x[17] = a;
-    x[18] = b;
-    x[19] = da;
-    x[20] = db;
+    x.fixed_rows_mut::<3>(17).copy_from(&p.link_direction());
+    x.fixed_rows_mut::<3>(20).copy_from(&p.link_rate());
     x
 }
 

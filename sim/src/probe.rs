@@ -45,18 +45,30 @@
 //! Air drag on the probe is **not** modelled while it is attached (the seed paper's
 //! equations); [`ProbeParams::drag`] acts only in free flight.
 //!
-//! # Singularity
+//! # Singularity, and the state the plant keeps
 //!
 //! The two-angle parametrisation is singular at `|beta| = pi/2` (the link along world +-y:
-//! `alpha` is then undefined and `a''` divides by `cos^2 b`). Near it the swing
-//! accelerations grow without bound and the integration loses accuracy; a non-finite result
-//! is a [`crate::plant::CrashReason::NonFinite`] crash. The missions keep `beta` near 0;
-//! stay within `|beta| < 1.4` rad.
+//! `alpha` is then undefined and `a''` divides by `cos^2 b`). The plant therefore does not
+//! integrate the angles: it keeps the link direction `n` itself and its rate `n'` (six
+//! numbers for two degrees of freedom), whose equation has no singularity
+//! ([`link_acceleration`]):
+//!
+//! ```text
+//! n'' = -(I - n n^T) (P'' + g e3) / l - |n'|^2 n
+//! ```
+//!
+//! (the tangential part says the probe's acceleration plus gravity is along the link, the
+//! normal part is `d^2/dt^2 |n|^2 = 0`). After each step `n` is normalized and `n'` made
+//! tangent again, which removes the integrator's drift from `|n| = 1`. The angles
+//! ([`Probe::ang`], [`Probe::dang`]) are computed from `n` and `n'` when asked for: they are
+//! what an encoder on a two-axis gimbal reads, and the rates are singular where the angles
+//! are. A controller that uses the angles works in a frame where `beta` stays small (the
+//! flip-and-throw mission's throw frame, `crate::throw`).
 //!
 //! # Phases
 //!
-//! * [`ProbePhase::Attached`]: integrated with the vehicle in the same RK4 step (21 states:
-//!   the vehicle's 17 plus `alpha, beta, alpha', beta'`). If the probe goes below the ground
+//! * [`ProbePhase::Attached`]: integrated with the vehicle in the same RK4 step (23 states:
+//!   the vehicle's 17 plus `n` and `n'`). If the probe goes below the ground
 //!   plane while attached, the time is recorded ([`Probe::struck_ground_attached`]) and the
 //!   dynamics continue (there is no ground contact for the attached probe). While the vehicle
 //!   is held on the ground, the swing angles are held and the swing rates are zero.
@@ -210,6 +222,64 @@ pub fn coupled_acceleration(
     }
 }
 
+/// Swing angles `(alpha, beta)` of a link direction `n` (the inverse of
+/// [`link_direction`]; `n` need not be normalized): `alpha = atan2(n_x, -n_z)`,
+/// `beta = atan2(n_y, |(n_x, n_z)|)`.
+pub fn swing_angles(n: &Vector3<f64>) -> [f64; 2] {
+    [n.x.atan2(-n.z), n.y.atan2(n.x.hypot(n.z))]
+}
+
+/// Swing rates `(alpha', beta')` of a link moving at `nd = n'` at the swing angles `ang`:
+/// `n' = n_a alpha' + n_b beta'` with `n_a . n_b = 0`, `|n_a|^2 = cos^2 b`, `|n_b| = 1`.
+/// Singular at `|beta| = pi/2`, like the angles.
+pub fn swing_rates(ang: [f64; 2], nd: &Vector3<f64>) -> [f64; 2] {
+    let (na, nb) = link_jacobian(ang);
+    let cb = ang[1].cos();
+    [na.dot(nd) / (cb * cb), nb.dot(nd)]
+}
+
+/// The link's rate `n' = n_a alpha' + n_b beta'` at swing angles `ang` and rates `dang`.
+pub fn link_rate(ang: [f64; 2], dang: [f64; 2]) -> Vector3<f64> {
+    let (na, nb) = link_jacobian(ang);
+    na * dang[0] + nb * dang[1]
+}
+
+/// The link's acceleration `n''` for a unit link direction `n` moving at `nd`, of a pendulum
+/// of length `l` whose pivot accelerates by `pivot_acc` under gravity `-g e3`:
+/// `n'' = -(I - n n^T)(pivot_acc + g e3) / l - |n'|^2 n`. No singularity (the plant's
+/// equation; [`swing_acceleration`] is the same in angles).
+pub fn link_acceleration(
+    n: &Vector3<f64>,
+    nd: &Vector3<f64>,
+    pivot_acc: &Vector3<f64>,
+    g: f64,
+    l: f64,
+) -> Vector3<f64> {
+    let gacc = pivot_acc + Vector3::new(0.0, 0.0, g);
+    let tangential = gacc - n * n.dot(&gacc);
+    -tangential / l - n * nd.norm_squared()
+}
+
+/// The coupled accelerations in the plant's coordinates: as [`coupled_acceleration`], for
+/// the link direction `n` and its rate `nd`; the swing part is `n''` ([`link_acceleration`]).
+pub fn coupled_link_acceleration(
+    force: &Vector3<f64>,
+    vehicle_mass: f64,
+    g: f64,
+    params: &ProbeParams,
+    n: &Vector3<f64>,
+    nd: &Vector3<f64>,
+) -> (Vector3<f64>, Vector3<f64>, f64) {
+    let (mq, mp, l) = (vehicle_mass, params.mass, params.length);
+    let tension = mp * (mq * l * nd.norm_squared() - n.dot(force)) / (mq + mp);
+    let mut vehicle = force / mq - Vector3::new(0.0, 0.0, g);
+    if mp != 0.0 {
+        vehicle += n * (tension / mq);
+    }
+    let link = link_acceleration(n, nd, &vehicle, g, l);
+    (vehicle, link, tension)
+}
+
 /// Phase of the probe's flight.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ProbePhase {
@@ -249,8 +319,10 @@ pub struct Landing {
 pub struct Probe {
     params: ProbeParams,
     phase: ProbePhase,
-    ang: [f64; 2],
-    dang: [f64; 2],
+    /// Link direction, vehicle to probe (unit); the values at the release once released.
+    n: Vector3<f64>,
+    /// Its rate `n'` (tangent: `n . n' = 0`).
+    nd: Vector3<f64>,
     /// Free-flight position (landing point once landed); unused while attached.
     pos: Vector3<f64>,
     /// Free-flight velocity (zero once landed); unused while attached.
@@ -273,8 +345,8 @@ impl Probe {
         let mut probe = Self {
             params,
             phase: ProbePhase::Attached,
-            ang,
-            dang,
+            n: link_direction(ang),
+            nd: link_rate(ang, dang),
             pos: Vector3::zeros(),
             vel: Vector3::zeros(),
             start: Vector3::zeros(),
@@ -302,41 +374,42 @@ impl Probe {
         self.phase == ProbePhase::Attached
     }
 
-    /// Swing angles `(alpha, beta)`, rad. Meaningful while attached; afterwards the values
-    /// at the release.
+    /// Swing angles `(alpha, beta)`, rad, of the link direction ([`swing_angles`]).
+    /// Meaningful while attached; afterwards the values at the release.
     pub fn ang(&self) -> [f64; 2] {
-        self.ang
+        swing_angles(&self.n)
     }
 
-    /// Swing rates `(alpha', beta')`, rad/s. Meaningful while attached; afterwards the
-    /// values at the release.
+    /// Swing rates `(alpha', beta')`, rad/s ([`swing_rates`]; not finite at
+    /// `|beta| = pi/2`). Meaningful while attached; afterwards the values at the release.
     pub fn dang(&self) -> [f64; 2] {
-        self.dang
+        swing_rates(self.ang(), &self.nd)
     }
 
-    /// Link direction `n` at the current swing angles (vehicle to probe, world frame).
+    /// Link direction `n` (unit, vehicle to probe, world frame).
     pub fn link_direction(&self) -> Vector3<f64> {
-        link_direction(self.ang)
+        self.n
+    }
+
+    /// The link direction's rate `n'`, world frame, 1/s.
+    pub fn link_rate(&self) -> Vector3<f64> {
+        self.nd
     }
 
     /// Probe position, world frame, m, in every phase: `P + l n` while attached (with the
     /// vehicle state `vehicle`), the free-flight position, or the landing point.
     pub fn position(&self, vehicle: &QuadState) -> Vector3<f64> {
         match self.phase {
-            ProbePhase::Attached => vehicle.p + link_direction(self.ang) * self.params.length,
+            ProbePhase::Attached => vehicle.p + self.n * self.params.length,
             ProbePhase::Free | ProbePhase::Landed => self.pos,
         }
     }
 
-    /// Probe velocity, world frame, m/s, in every phase: `P' + l (n_a a' + n_b b')` while
-    /// attached, the free-flight velocity, or zero once landed.
+    /// Probe velocity, world frame, m/s, in every phase: `P' + l n'` while attached, the
+    /// free-flight velocity, or zero once landed.
     pub fn velocity(&self, vehicle: &QuadState) -> Vector3<f64> {
         match self.phase {
-            ProbePhase::Attached => {
-                let (na, nb) = link_jacobian(self.ang);
-                let [da, db] = self.dang;
-                vehicle.v + (na * da + nb * db) * self.params.length
-            }
+            ProbePhase::Attached => vehicle.v + self.nd * self.params.length,
             ProbePhase::Free => self.vel,
             ProbePhase::Landed => Vector3::zeros(),
         }
@@ -366,10 +439,7 @@ impl Probe {
 
     /// Whether every state component is finite.
     pub fn is_finite(&self) -> bool {
-        self.ang
-            .iter()
-            .chain(self.dang.iter())
-            .all(|x| x.is_finite())
+        self.n.iter().chain(self.nd.iter()).all(|x| x.is_finite())
             && self
                 .pos
                 .iter()
@@ -377,10 +447,13 @@ impl Probe {
                 .all(|x| x.is_finite())
     }
 
-    /// Replaces the swing state (attached probe).
-    pub(crate) fn set_swing(&mut self, ang: [f64; 2], dang: [f64; 2]) {
-        self.ang = ang;
-        self.dang = dang;
+    /// Replaces the swing state (attached probe) with the link direction `n` (normalized
+    /// here) and its rate `nd` (its component along `n` removed): the constraint `|n| = 1`
+    /// and its derivative hold again after an integration step.
+    pub(crate) fn set_link(&mut self, n: Vector3<f64>, nd: Vector3<f64>) {
+        let n = n.normalize();
+        self.nd = nd - n * n.dot(&nd);
+        self.n = n;
     }
 
     /// Records a ground strike at `time` if the attached probe is below the ground and none

@@ -45,6 +45,20 @@
 //!
 //! The thrust command in newtons is `(mq + mp) c` with the nominal masses; the mass estimator
 //! of the flip mission is not used (the link force would bias it).
+//!
+//! # The throw frame
+//!
+//! The model's swing angles are singular at `|beta| = pi/2` (the link along the model's y
+//! axis: `models/quadrotor_probe.mpc`). A throw pumps the swing in the vertical plane of its
+//! heading, so the solver works in the throw frame: the world turned by the heading
+//! ([`ThrowConfig::yaw`]) about the vertical, where that plane is the model's x-z plane, the
+//! swing is `alpha` and `beta` is only the out-of-plane wobble. The model is invariant under
+//! turns about the vertical (gravity is vertical, the weights are equal over x and y), so this
+//! changes nothing at heading 0 and makes every heading fly alike. The plan's model states
+//! ([`ThrowPlan::states`]) are in the throw frame; everything else (estimates, references,
+//! the plan's points and velocities) is in the world frame. The encoder reads the swing angles
+//! in the throw frame, and a measured `|beta|` above [`MODEL_SWING_LIMIT`] ends the trial with
+//! that reason (the model's equations lose accuracy towards the singularity), as a failure.
 
 use std::time::Instant;
 
@@ -60,13 +74,18 @@ use crate::estimator::{Estimate, Estimator, EstimatorConfig};
 use crate::log::Sample;
 use crate::mission::{G, Phase, RefPoint, Segment};
 use crate::plant::{Contact, Disturbance, Plant, QuadParams, QuadState};
-use crate::probe::{ProbeParams, link_direction, link_jacobian};
+use crate::probe::{ProbeParams, link_direction, link_rate, swing_angles, swing_rates};
 use crate::rate_loop::{RateController, RateGains};
 use crate::release::{self, ReleaseBounds, ReleaseError, ReleasePlan};
 use crate::report::TimeStats;
 
 /// Link length of the `quadrotor_probe` model \[m\] (a constant of the model file).
 pub const MODEL_LINK_LENGTH: f64 = 0.5;
+
+/// Largest out-of-plane swing angle `|beta|` \[rad\] the controller flies with: the model's
+/// swing equation divides by `cos^2 beta` (30 times the hanging value at 1.4 rad) and is
+/// singular at `pi/2`. A measured `|beta|` above it ends a throw trial as a failure.
+pub const MODEL_SWING_LIMIT: f64 = 1.4;
 
 /// Recovery tolerance after release \[m\] (issue: back within 0.15 m of the hold point).
 pub const THROW_RECOVERY_TOL_M: f64 = 0.15;
@@ -320,7 +339,7 @@ pub struct ThrowPlan {
     pub vehicle_at_release: (Vector3<f64>, Vector3<f64>),
     /// Model states at `k * dt` from the throw's start, `k = 0..=2N` (the plan's `N` stages,
     /// then `N` more with the last control held: a continuation the tracking horizon can
-    /// look into).
+    /// look into), in the throw frame (module documentation).
     pub states: Vec<[f64; pm::NX_MODEL]>,
     /// Controls of the plan, `k = 0..2N`.
     pub controls: Vec<[f64; 4]>,
@@ -333,6 +352,21 @@ pub struct ThrowPlan {
 }
 
 impl ThrowPlan {
+    /// The plan made in the throw frame `frame` with its points and velocities in the world
+    /// frame (the model states stay in the throw frame).
+    fn out_of(self, frame: &ThrowFrame) -> Self {
+        let (p, v) = self.vehicle_at_release;
+        Self {
+            target: frame.vec_out(&self.target),
+            release_point: frame.vec_out(&self.release_point),
+            release_velocity: frame.vec_out(&self.release_velocity),
+            asked_velocity: frame.vec_out(&self.asked_velocity),
+            planned_landing: frame.vec_out(&self.planned_landing),
+            vehicle_at_release: (frame.vec_out(&p), frame.vec_out(&v)),
+            ..self
+        }
+    }
+
     /// Planned release time after the throw's start \[s\].
     pub fn release_time(&self) -> f64 {
         self.release_stage as f64 * pm::DT
@@ -355,22 +389,85 @@ impl ThrowPlan {
     }
 }
 
-/// Probe position and velocity of a model state.
+/// Probe position and velocity of a model state (in the state's frame).
 pub fn probe_of_state(x: &[f64; pm::NX_MODEL], l: f64) -> (Vector3<f64>, Vector3<f64>) {
     let p = Vector3::new(x[0], x[1], x[2]);
     let v = Vector3::new(x[7], x[8], x[9]);
     let ang = [x[10], x[11]];
-    let (na, nb) = link_jacobian(ang);
     (
         p + link_direction(ang) * l,
-        v + (na * x[12] + nb * x[13]) * l,
+        v + link_rate(ang, [x[12], x[13]]) * l,
     )
 }
 
-fn hover_state(p: &Vector3<f64>, yaw: f64) -> [f64; pm::NX_MODEL] {
-    let q = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), yaw);
+/// The throw frame: the world turned by the throw's heading about the vertical (module
+/// documentation). At heading 0 every conversion is exact (the identity rotation).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ThrowFrame {
+    /// World from throw frame: the turn by the heading.
+    turn: UnitQuaternion<f64>,
+}
+
+impl ThrowFrame {
+    /// The frame of a throw heading `yaw` \[rad\] (0: towards +x).
+    pub fn new(yaw: f64) -> Self {
+        Self {
+            turn: UnitQuaternion::from_axis_angle(&Vector3::z_axis(), yaw),
+        }
+    }
+
+    /// A world vector (or point) in the throw frame.
+    pub fn vec_in(&self, v: &Vector3<f64>) -> Vector3<f64> {
+        self.turn.inverse_transform_vector(v)
+    }
+
+    /// A throw-frame vector (or point) in the world frame.
+    pub fn vec_out(&self, v: &Vector3<f64>) -> Vector3<f64> {
+        self.turn.transform_vector(v)
+    }
+
+    /// A world attitude (body to world) as body to throw frame.
+    pub fn attitude_in(&self, q: &UnitQuaternion<f64>) -> UnitQuaternion<f64> {
+        self.turn.inverse() * q
+    }
+
+    /// A model state's vehicle part (position, attitude, velocity) turned by `rot`; the
+    /// swing, the body rates and the thrust are kept.
+    fn turn_state(rot: &UnitQuaternion<f64>, x: &[f64; pm::NX_MODEL]) -> [f64; pm::NX_MODEL] {
+        let mut y = *x;
+        let p = rot.transform_vector(&Vector3::new(x[0], x[1], x[2]));
+        let v = rot.transform_vector(&Vector3::new(x[7], x[8], x[9]));
+        let q = rot.quaternion() * nalgebra::Quaternion::new(x[3], x[4], x[5], x[6]);
+        y[..3].copy_from_slice(p.as_slice());
+        y[3..7].copy_from_slice(&[q.w, q.i, q.j, q.k]);
+        y[7..10].copy_from_slice(v.as_slice());
+        y
+    }
+
+    /// A model state with a world-frame vehicle part in the throw frame (the swing angles are
+    /// the caller's, already in the throw frame).
+    pub fn state_in(&self, x: &[f64; pm::NX_MODEL]) -> [f64; pm::NX_MODEL] {
+        Self::turn_state(&self.turn.inverse(), x)
+    }
+
+    /// A throw-frame quaternion `[w, x, y, z]` in the world frame.
+    fn quat_out(&self, q: &[f64; 4]) -> [f64; 4] {
+        let r = self.turn.quaternion() * nalgebra::Quaternion::new(q[0], q[1], q[2], q[3]);
+        [r.w, r.i, r.j, r.k]
+    }
+
+    /// The swing of a world link direction `n` and rate `nd` as the model's angles and rates
+    /// in the throw frame.
+    pub fn swing_in(&self, n: &Vector3<f64>, nd: &Vector3<f64>) -> ([f64; 2], [f64; 2]) {
+        let ang = swing_angles(&self.vec_in(n));
+        (ang, swing_rates(ang, &self.vec_in(nd)))
+    }
+}
+
+/// Hover at `p` with the probe hanging, heading 0.
+fn hover_state(p: &Vector3<f64>) -> [f64; pm::NX_MODEL] {
     [
-        p.x, p.y, p.z, q.w, q.i, q.j, q.k, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, G,
+        p.x, p.y, p.z, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, G,
     ]
 }
 
@@ -390,10 +487,22 @@ pub fn plan_throw(cfg: &ThrowConfig, mq: f64) -> Result<ThrowPlan, ThrowError> {
     if !(mq.is_finite() && mq > 0.0) {
         return Err(ThrowError::Invalid("vehicle mass must be positive".into()));
     }
+    let frame = ThrowFrame::new(cfg.yaw);
+    let local = ThrowConfig {
+        yaw: 0.0,
+        start: frame.vec_in(&cfg.start),
+        throw_point: frame.vec_in(&cfg.throw_point),
+        ..cfg.clone()
+    };
+    plan_in_frame(&local, mq).map(|plan| plan.out_of(&frame))
+}
+
+/// [`plan_throw`] for a throw at heading 0 (in its throw frame).
+fn plan_in_frame(cfg: &ThrowConfig, mq: f64) -> Result<ThrowPlan, ThrowError> {
     let l = cfg.probe.length;
     let dir = cfg.direction();
     let target = cfg.target();
-    let x0 = hover_state(&cfg.throw_point, cfg.yaw);
+    let x0 = hover_state(&cfg.throw_point);
     let mut s = planning_solver(cfg, mq, &x0)?;
 
     // First guess of the release point: above and ahead of the throw point.
@@ -604,10 +713,14 @@ pub struct ThrowTrial {
     pub probe_landing: Option<(f64, Vector3<f64>)>,
     /// When the probe hit the ground while still attached.
     pub probe_struck: Option<f64>,
-    /// How it ended ("landed", "crashed: ...", "timeout").
+    /// How it ended ("landed", "crashed: ...", "timeout", "ended: ..." when the swing left
+    /// the model's range).
     pub outcome: String,
     /// The hold point after release.
     pub hold_point: Vector3<f64>,
+    /// The largest out-of-plane swing `|beta|` (throw frame, true value) while the probe was
+    /// attached \[rad\]; the model is singular at `pi/2` ([`MODEL_SWING_LIMIT`]).
+    pub max_out_of_plane_rad: f64,
 }
 
 /// The reference schedule after release.
@@ -652,12 +765,17 @@ impl AfterRelease {
 }
 
 impl Schedule<'_> {
+    /// The throw frame (module documentation).
+    fn frame(&self) -> ThrowFrame {
+        ThrowFrame::new(self.cfg.yaw)
+    }
+
     /// The position reference at `t`, for the log.
     fn logged_reference(&self, t: f64) -> Vector3<f64> {
         match self.reference(t).1 {
             Ref::Plan(j) => {
                 let x = self.plan.state(j);
-                Vector3::new(x[0], x[1], x[2])
+                self.frame().vec_out(&Vector3::new(x[0], x[1], x[2]))
             }
             Ref::Point(p) => p.p,
         }
@@ -853,23 +971,28 @@ impl ThrowController {
         sched: &Schedule<'_>,
     ) -> OuterStats {
         let start = Instant::now();
-        let q = aligned(&est.q, &self.plan_q(usize::from(self.started)));
+        let frame = sched.frame();
+        let q = aligned(
+            &frame.attitude_in(&est.q),
+            &self.plan_q(usize::from(self.started)),
+        );
+        let (p, v) = (frame.vec_in(&est.p), frame.vec_in(&est.v));
         let (ang, dang) = if self.released {
             ([0.0; 2], [0.0; 2])
         } else {
             swing
         };
         let x0 = [
-            est.p.x,
-            est.p.y,
-            est.p.z,
+            p.x,
+            p.y,
+            p.z,
             q[0],
             q[1],
             q[2],
             q[3],
-            est.v.x,
-            est.v.y,
-            est.v.z,
+            v.x,
+            v.y,
+            v.z,
             ang[0],
             ang[1],
             dang[0],
@@ -894,7 +1017,10 @@ impl ThrowController {
             let (_, r) = sched.reference(t + k as f64 * pm::DT);
             let (xr, ur) = match r {
                 Ref::Plan(j) => (sched.plan.state(j), sched.plan.control(j)),
-                Ref::Point(p) => point_state(&p, &self.plan_q(k + 1)),
+                Ref::Point(p) => {
+                    let (x, u) = point_state(&p, &frame.quat_out(&self.plan_q(k + 1)));
+                    (frame.state_in(&x), u)
+                }
             };
             let _ = self.solver.set_xref(k, &xr);
             let _ = self.solver.set_uref(k, &ur);
@@ -972,13 +1098,13 @@ fn predicted_landing(
     est: &Estimate,
     swing: ([f64; 2], [f64; 2]),
     probe: &ProbeParams,
+    frame: &ThrowFrame,
 ) -> Option<Prediction> {
     let (p, v) = (est.p, est.v);
     let (ang, dang) = swing;
-    let (na, nb) = link_jacobian(ang);
     let l = probe.length;
-    let pp = p + link_direction(ang) * l;
-    let pv = v + (na * dang[0] + nb * dang[1]) * l;
+    let pp = p + frame.vec_out(&link_direction(ang)) * l;
+    let pv = v + frame.vec_out(&link_rate(ang, dang)) * l;
     let lp = if probe.drag > 0.0 {
         landing_with_drag(&pp, &pv, probe.drag / probe.mass)
     } else {
@@ -1036,6 +1162,10 @@ pub fn run_throw_trial(cfg: &ThrowSimConfig) -> Result<ThrowTrial, ThrowError> {
         let acc_world = e_raw.q * plant.specific_acceleration() - Vector3::z() * G;
         let e = compensated(&e_raw, &acc_world, lat);
         let swing = encoder.read(&plant);
+        if let Some(why) = swing_out_of_model(&swing, release_rec.is_none()) {
+            outcome = why;
+            break;
+        }
         let (mut phase, _) = sched.reference(t);
         if transitions.last().map(|x| x.1) != Some(phase) {
             transitions.push((t, phase));
@@ -1134,6 +1264,7 @@ pub fn run_throw_trial(cfg: &ThrowSimConfig) -> Result<ThrowTrial, ThrowError> {
         outcome,
         hold_point,
         plan,
+        max_out_of_plane_rad: encoder.max_out_of_plane,
     })
 }
 
@@ -1186,6 +1317,9 @@ struct Encoder {
     rng: StdRng,
     angle: Option<Normal<f64>>,
     rate: Option<Normal<f64>>,
+    frame: ThrowFrame,
+    /// The largest true `|beta|` read while the probe was attached \[rad\].
+    max_out_of_plane: f64,
 }
 
 impl Encoder {
@@ -1195,14 +1329,19 @@ impl Encoder {
             rng: StdRng::seed_from_u64(seed ^ 0x7e57_ab1e),
             angle: noise(tc.angle_noise),
             rate: noise(tc.rate_noise),
+            frame: ThrowFrame::new(tc.yaw),
+            max_out_of_plane: 0.0,
         }
     }
 
-    /// The measured swing (angles, rates); zero once the probe is gone.
+    /// The measured swing (angles, rates) in the throw frame; zero once the probe is gone.
     fn read(&mut self, plant: &Plant) -> ([f64; 2], [f64; 2]) {
-        let (ang_true, dang_true) = plant
-            .probe()
-            .map_or(([0.0; 2], [0.0; 2]), |p| (p.ang(), p.dang()));
+        let (ang_true, dang_true) = plant.probe().map_or(([0.0; 2], [0.0; 2]), |p| {
+            self.frame.swing_in(&p.link_direction(), &p.link_rate())
+        });
+        if plant.probe().is_some_and(|p| p.is_attached()) {
+            self.max_out_of_plane = self.max_out_of_plane.max(ang_true[1].abs());
+        }
         let rng = &mut self.rng;
         let mut meas = |std: &Option<Normal<f64>>| std.map_or(0.0, |d| d.sample(rng));
         let (n_ang, n_rate) = (self.angle, self.rate);
@@ -1213,6 +1352,19 @@ impl Encoder {
     }
 }
 
+/// Why a trial must end at a measured swing `swing` of the attached probe: `|beta|` beyond
+/// [`MODEL_SWING_LIMIT`], where the model no longer holds (module documentation).
+fn swing_out_of_model(swing: &([f64; 2], [f64; 2]), attached: bool) -> Option<String> {
+    let beta = swing.0[1];
+    let outside = beta.is_nan() || beta.abs() > MODEL_SWING_LIMIT;
+    (attached && outside).then(|| {
+        format!(
+            "ended: the probe swung {beta:.2} rad out of the throw's plane, beyond the model's \
+             {MODEL_SWING_LIMIT} rad (its swing angles are singular at pi/2)"
+        )
+    })
+}
+
 /// The release trigger: within the window around the planned release, fire at the step
 /// nearest to the crossing of the target by the predicted landing point, or at the end of
 /// the window.
@@ -1220,6 +1372,8 @@ struct Trigger {
     window: (f64, f64),
     target: Vector3<f64>,
     dir: Vector3<f64>,
+    /// The encoder's frame.
+    frame: ThrowFrame,
     /// The predicted landing's distance past the target at the last step \[m\].
     prev_along: Option<f64>,
 }
@@ -1231,6 +1385,7 @@ impl Trigger {
             window: (t_rel_plan - tc.window_before, t_rel_plan + tc.window_after),
             target: plan.target,
             dir: tc.direction(),
+            frame: ThrowFrame::new(tc.yaw),
             prev_along: None,
         }
     }
@@ -1247,7 +1402,7 @@ impl Trigger {
         if t < self.window.0 {
             return None;
         }
-        let pred = predicted_landing(e, swing, probe);
+        let pred = predicted_landing(e, swing, probe, &self.frame);
         // Release at the step nearest to the crossing: now, if the predicted range is
         // past the target or closer to it than the next step will be.
         let along = pred.map(|(lp, _, _)| (lp - self.target).dot(&self.dir));
@@ -1337,6 +1492,9 @@ pub struct ThrowSummary {
     pub peak_pitch_rate_rad_s: f64,
     /// Largest tilt (body z from world z) during the throw and recovery \[rad\].
     pub max_tilt_rad: f64,
+    /// Largest out-of-plane swing `|beta|` while attached \[rad\] (the model's limit:
+    /// [`MODEL_SWING_LIMIT`]).
+    pub max_out_of_plane_rad: f64,
     /// Solver fallbacks over the trial (and from the throw to the end of the hold).
     pub fallbacks: u32,
     /// Fallbacks from the throw's start to the end of the hold.
@@ -1404,6 +1562,7 @@ pub fn summarize_throw(tr: &ThrowTrial) -> ThrowSummary {
         min_altitude_m: if min_alt.is_finite() { min_alt } else { 0.0 },
         peak_pitch_rate_rad_s: window.iter().map(|s| s.wy.abs()).fold(0.0, f64::max),
         max_tilt_rad: max_rot,
+        max_out_of_plane_rad: tr.max_out_of_plane_rad,
         fallbacks: tr.samples.iter().filter(|s| s.fallback).count() as u32,
         fallbacks_throw: window.iter().filter(|s| s.fallback).count() as u32,
         solver_time_us: solver,

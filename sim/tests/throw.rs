@@ -5,13 +5,17 @@
 
 use mpc_sim::release::{self, ReleaseError};
 use mpc_sim::throw::{
-    LANDING_TOL_M, ThrowConfig, ThrowError, ThrowSimConfig, ThrowSummary, plan_throw,
-    run_throw_trial, summarize_throw,
+    LANDING_TOL_M, MODEL_SWING_LIMIT, ThrowConfig, ThrowError, ThrowSimConfig, ThrowSummary,
+    plan_throw, run_throw_trial, summarize_throw,
 };
 
 const G: f64 = 9.81;
 
 fn fly(range: f64, seeds: std::ops::Range<u64>) -> Vec<ThrowSummary> {
+    fly_heading(range, 0.0, seeds)
+}
+
+fn fly_heading(range: f64, yaw: f64, seeds: std::ops::Range<u64>) -> Vec<ThrowSummary> {
     let seeds: Vec<u64> = seeds.collect();
     let mut out: Vec<(u64, ThrowSummary)> = std::thread::scope(|s| {
         let handles: Vec<_> = seeds
@@ -23,6 +27,7 @@ fn fly(range: f64, seeds: std::ops::Range<u64>) -> Vec<ThrowSummary> {
                         .map(|&seed| {
                             let mut cfg = ThrowSimConfig::new(ThrowConfig {
                                 range,
+                                yaw,
                                 ..ThrowConfig::default()
                             });
                             cfg.seed = seed;
@@ -71,6 +76,8 @@ fn check(s: &ThrowSummary) {
     assert!(s.recovery_time_s.is_some_and(|t| t <= 3.0), "{s:?}");
     assert!(s.min_altitude_m >= 1.0, "{s:?}");
     assert_eq!(s.fallbacks, 0, "seed {}", s.seed);
+    // The swing stays in the throw's plane, far from the model's singularity at pi/2.
+    assert!(s.max_out_of_plane_rad < 0.2, "seed {}: {s:?}", s.seed);
 }
 
 #[test]
@@ -96,6 +103,68 @@ fn the_other_ranges_of_the_table_land_too() {
             check(&s);
         }
     }
+}
+
+/// The solver works in the throw frame, so a throw at any heading flies as at heading 0 and
+/// its swing stays in the model's x-z plane: the two-angle model's singularity at
+/// |beta| = pi/2 is never near (without the frame, a throw towards +y swung the probe through
+/// it and crashed).
+#[test]
+fn throws_at_any_heading_land_on_target_with_the_swing_in_plane() {
+    use std::f64::consts::{FRAC_PI_2, PI};
+    for yaw in [FRAC_PI_2, -2.4, PI] {
+        for s in fly_heading(15.0, yaw, 0..2) {
+            println!(
+                "heading {yaw:.2} rad: out of plane {:.4} rad",
+                s.max_out_of_plane_rad
+            );
+            check(&s);
+            let t = s.target_m;
+            let along = (
+                t[0] * yaw.cos() + t[1] * yaw.sin(),
+                t[1] * yaw.cos() - t[0] * yaw.sin(),
+            );
+            assert!(
+                (along.0 - 15.0).abs() < 1e-9 && along.1.abs() < 1e-9,
+                "{t:?}"
+            );
+        }
+    }
+}
+
+/// A measured swing beyond the model's range (|beta| > 1.4 rad, towards the angles'
+/// singularity at pi/2) ends the trial as a failure that says so, instead of flying the
+/// solver where its model no longer holds. An encoder with 3 rad of noise reads such angles
+/// at once.
+#[test]
+fn a_swing_out_of_the_models_range_ends_the_trial_as_a_failure() {
+    let mut cfg = ThrowSimConfig::new(ThrowConfig {
+        range: 10.0,
+        angle_noise: 3.0,
+        ..ThrowConfig::default()
+    });
+    cfg.seed = 3;
+    let tr = run_throw_trial(&cfg).expect("the throw is planned");
+    let s = summarize_throw(&tr);
+    assert!(
+        tr.outcome.starts_with("ended: the probe swung"),
+        "{}",
+        tr.outcome
+    );
+    assert!(
+        tr.outcome.contains(&format!("{MODEL_SWING_LIMIT} rad")),
+        "{}",
+        tr.outcome
+    );
+    assert!(!s.success);
+    assert!(
+        s.failures
+            .iter()
+            .any(|f| f.contains("out of the throw's plane")),
+        "{:?}",
+        s.failures
+    );
+    assert!(tr.release.is_none() && tr.probe_landing.is_none());
 }
 
 /// With air drag on the free probe the trigger predicts the landing point with the drag

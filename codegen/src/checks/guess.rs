@@ -7,7 +7,8 @@
 //! weights, references), each located at its `.mpc` expression; then, when those are
 //! finite, the lowered functions the solver really calls (the integrator step with its
 //! intermediate stages, and every Jacobian and Hessian), located at the equation, residual or
-//! constraint of the offending row.
+//! constraint of the offending row. For the implicit `irk` integrator that is the right-hand
+//! side with `df/dx` and `df/du` at the guess: its Newton iterates are not evaluated here.
 
 use mpc_dsl::lang::{DiagnosticKind, Place};
 use mpc_dsl::ocp::{Dynamics, Stage, symbols_of};
@@ -231,7 +232,11 @@ fn lowered_problems(ocp: &Ocp<'_>, l: &Lowered) -> Vec<Problem> {
     type Locate<'a> = Box<dyn Fn(&str, usize) -> Option<Place> + 'a>;
     let mut functions: Vec<(&str, Stage, &Function, Locate<'_>)> = vec![
         (
-            "the dynamics step (integrator)",
+            if l.irk.is_some() {
+                "the dynamics' right-hand side or its Jacobian (for the irk step)"
+            } else {
+                "the dynamics step (integrator)"
+            },
             path,
             &l.dynamics,
             Box::new(|_, i| dyn_rows(i)),

@@ -223,5 +223,14 @@ mod tests {
         // A guess where it is defined passes.
         let src = model("", "sqrt(x) + u", "").replace("state x;", "state x guess 1;");
         assert_eq!(problems(&src, &Options::new()).0, "");
+        // With the implicit integrator: the right-hand side's Jacobian `fx`.
+        let src = model("", "sqrt(x) + u", "").replace("ode rk4", "ode irk(stages = 1)");
+        let (text, at) = problems(&src, &Options::new());
+        assert!(
+            text.contains("right-hand side or its Jacobian (for the irk step) is not finite")
+                && text.contains("of its matrix `fx`"),
+            "{text}"
+        );
+        assert_eq!(at, vec![(4, 41)]);
     }
 }

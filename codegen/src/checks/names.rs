@@ -39,6 +39,10 @@ pub const SOLVER_METHODS: &[&str] = &[
     "set_soft_penalties",
     "terminal_soft_penalties",
     "set_terminal_soft_penalties",
+    "control_bound_penalties",
+    "set_control_bound_penalties",
+    "state_bound_penalties",
+    "set_state_bound_penalties",
     "set_control_bounds",
     "control_bounds",
     "set_state_bounds",
@@ -101,6 +105,10 @@ pub const C_FUNCTIONS: &[&str] = &[
     "set_soft_penalties",
     "get_terminal_soft_penalties",
     "set_terminal_soft_penalties",
+    "get_control_bound_penalties",
+    "set_control_bound_penalties",
+    "get_state_bound_penalties",
+    "set_state_bound_penalties",
     "prepare",
     "feedback",
     "solve_sqp",
@@ -132,6 +140,12 @@ pub const CONSTANTS: &[&str] = &[
     "NYN",
     "NG",
     "NGN",
+    "NG_QP",
+    "NGN_QP",
+    "NSBU",
+    "NSBX",
+    "SOFT_CONTROL_BOUNDS",
+    "SOFT_STATE_BOUNDS",
     "NC",
     "NBX",
     "NR",
@@ -386,12 +400,14 @@ mod tests {
     use super::*;
 
     /// Names of every derived form: scalar and vector states and controls, stage and global
-    /// parameters, a soft constraint and an input-rate term (which add code paths).
+    /// parameters, a soft constraint, soft bounds and an input-rate term (which add code
+    /// paths).
     const MODEL: &str = "model names;\nstate s; state v[2];\ncontrol c; control w[2];\n\
         param r[2] stage; param g global default 1; param up[3] global;\n\
         dynamics ode rk4 { der(s) = v[0] + c; der(v) = w * g; }\nhorizon N = 4, dt = 0.1;\n\
         cost { Q = diag(1, 1, 1) ref [r, 0]; R = diag(1, 1, 1); rate = diag(1, 1, 1) prev up; }\n\
-        constraints { c in [-1, 1]; k: -1 <= s + c <= 1 soft l1 = 1; terminal e: -1 <= s <= 1; }\n";
+        constraints { c in [-1, 1] soft l1 = 1; s in [-2, 2] soft l2 = 1;\n\
+        k: -1 <= s + c <= 1 soft l1 = 1; terminal e: -1 <= s <= 1; }\n";
 
     /// The generated crate's `Solver` methods, C functions (without the prefix) and
     /// top-level constants, each with its number of definitions.

@@ -213,8 +213,8 @@ impl<'a> CAbi<'a> {
         let kinds = [
             ("control", quote!(NU), l.nu),
             ("state", quote!(NX_MODEL), l.nx_model),
-            ("constraint", quote!(NG), l.ng),
-            ("terminal_constraint", quote!(NGN), l.ngn),
+            ("constraint", quote!(NG), l.soft_bounds.ng_model),
+            ("terminal_constraint", quote!(NGN), l.soft_bounds.ngn_model),
         ];
         let fns = kinds
             .into_iter()

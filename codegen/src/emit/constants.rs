@@ -24,7 +24,8 @@ impl Emitter<'_> {
         let l = self.l;
         let real = real_ty(self.s);
         let (nx, nxm, nu, np) = (ul(l.nx), ul(l.nx_model), ul(l.nu), ul(l.np));
-        let (ny, nyn, ng, ngn, n) = (ul(l.ny), ul(l.nyn), ul(l.ng), ul(l.ngn), ul(l.n));
+        let (ng, ngn) = (ul(l.soft_bounds.ng_model), ul(l.soft_bounds.ngn_model));
+        let (ny, nyn, n) = (ul(l.ny), ul(l.nyn), ul(l.n));
         let sizes = self.sizes();
         let (nc, nbx, nr, nh) = (ul(sizes.nc), ul(sizes.nbx), ul(sizes.nr), ul(sizes.nh));
         let dt = lit(l.dt, self.s);
@@ -109,6 +110,7 @@ impl Emitter<'_> {
             lits(&l.l1n, s),
             lits(&l.l2n, s),
         );
+        let (ng, ngn) = (self.ng_qp(), self.ngn_qp());
         quote! {
             /// Initial guess of the solver state.
             pub const X_GUESS: [Real; NX] = #x_guess;
@@ -125,31 +127,32 @@ impl Emitter<'_> {
             /// Control upper bounds.
             pub const UBU: [Real; NU] = #ubu;
             /// Stage constraint lower bounds.
-            pub const LG: [Real; NG] = #lg;
+            pub const LG: [Real; #ng] = #lg;
             /// Stage constraint upper bounds.
-            pub const UG: [Real; NG] = #ug;
+            pub const UG: [Real; #ng] = #ug;
             /// Terminal constraint lower bounds.
-            pub const LGN: [Real; NGN] = #lgn;
+            pub const LGN: [Real; #ngn] = #lgn;
             /// Terminal constraint upper bounds.
-            pub const UGN: [Real; NGN] = #ugn;
+            pub const UGN: [Real; #ngn] = #ugn;
             /// L1 slack penalties of the stage constraints (0 with `L2` 0: hard).
-            pub const L1: [Real; NG] = #l1;
+            pub const L1: [Real; #ng] = #l1;
             /// L2 slack penalties of the stage constraints.
-            pub const L2: [Real; NG] = #l2;
+            pub const L2: [Real; #ng] = #l2;
             /// L1 slack penalties of the terminal constraints.
-            pub const L1N: [Real; NGN] = #l1n;
+            pub const L1N: [Real; #ngn] = #l1n;
             /// L2 slack penalties of the terminal constraints.
-            pub const L2N: [Real; NGN] = #l2n;
+            pub const L2N: [Real; #ngn] = #l2n;
         }
     }
 
     /// `type Rti` (the runtime solver with this crate's dimensions) and the `const` vectors
     /// that `Solver::unconfigured` and `configure` start from.
     pub(super) fn rti_type(&self) -> TokenStream {
+        let (ng, ngn) = (self.ng_qp(), self.ngn_qp());
         quote! {
             /// The runtime solver this crate instantiates.
             pub type Rti =
-                mpc_runtime::Rti<Real, Model, NX, NU, NP, NY, NYN, NG, NGN, N, NC, NBX, NR, NH>;
+                mpc_runtime::Rti<Real, Model, NX, NU, NP, NY, NYN, #ng, #ngn, N, NC, NBX, NR, NH>;
 
             const P_ZERO: SVector<Real, NP> =
                 SVector::from_array_storage(mpc_runtime::nalgebra::ArrayStorage([[0.0; NP]]));

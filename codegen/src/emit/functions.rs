@@ -43,6 +43,10 @@ impl Emitter<'_> {
     /// `functions::dynamics`: `F(x, u, p)`, `a = dF/dx`, `b = dF/du`.
     fn dynamics_fn(&self, uses: &mut Uses) -> TokenStream {
         let l = self.l;
+        if let Some(irk) = &l.irk {
+            // `ode`, the step's settings, `dynamics` and `dynamics_value` (`implicit.rs`).
+            return self.irk_fns(irk, uses);
+        }
         let body = body(
             &l.dynamics,
             self.s,
@@ -84,6 +88,10 @@ impl Emitter<'_> {
 
     /// `functions::dynamics_value`: `F(x, u, p)` alone.
     fn dynamics_value_fn(&self, uses: &mut Uses) -> TokenStream {
+        if self.l.irk.is_some() {
+            // Emitted with `dynamics` by `irk_fns`.
+            return quote!();
+        }
         let body = body(
             &self.l.dynamics_value,
             self.s,
@@ -207,11 +215,12 @@ impl Emitter<'_> {
         let Some(f) = &self.l.constraints else {
             return quote!();
         };
+        let ng = self.ng_qp();
         let body = body(
             f,
             self.s,
             &["cx", "cu"],
-            Some(quote!(SVector<Real, NG>)),
+            Some(quote!(SVector<Real, #ng>)),
             uses,
         );
         let doc = doc_lines(&rows_doc(
@@ -225,9 +234,9 @@ impl Emitter<'_> {
                 x: &SVector<Real, NX>,
                 u: &SVector<Real, NU>,
                 p: &SVector<Real, NP>,
-                cx: &mut SMatrix<Real, NG, NX>,
-                cu: &mut SMatrix<Real, NG, NU>,
-            ) -> SVector<Real, NG> {
+                cx: &mut SMatrix<Real, #ng, NX>,
+                cu: &mut SMatrix<Real, #ng, NU>,
+            ) -> SVector<Real, #ng> {
                 #body
             }
         }
@@ -238,7 +247,8 @@ impl Emitter<'_> {
         let Some(f) = &self.l.terminal_constraints else {
             return quote!();
         };
-        let body = body(f, self.s, &["cx"], Some(quote!(SVector<Real, NGN>)), uses);
+        let ngn = self.ngn_qp();
+        let body = body(f, self.s, &["cx"], Some(quote!(SVector<Real, #ngn>)), uses);
         let doc = doc_lines(&rows_doc(
             "Terminal constraints `h_N(x, p)` with `cx = dh_N/dx`.",
             &self.l.terminal_constraint_rows,
@@ -249,8 +259,8 @@ impl Emitter<'_> {
             pub fn terminal_constraints(
                 x: &SVector<Real, NX>,
                 p: &SVector<Real, NP>,
-                cx: &mut SMatrix<Real, NGN, NX>,
-            ) -> SVector<Real, NGN> {
+                cx: &mut SMatrix<Real, #ngn, NX>,
+            ) -> SVector<Real, #ngn> {
                 #body
             }
         }
@@ -265,12 +275,13 @@ impl Emitter<'_> {
         let constraints = self.model_constraints();
         let general_cost = self.model_general_cost();
         let constraints_hessian = self.model_constraints_hessian();
+        let (ng, ngn) = (self.ng_qp(), self.ngn_qp());
         quote! {
             /// The model, as the runtime's solver evaluates it.
             #[derive(Clone, Copy, Debug, Default)]
             pub struct Model;
 
-            impl mpc_runtime::Model<Real, NX, NU, NP, NY, NYN, NG, NGN> for Model {
+            impl mpc_runtime::Model<Real, NX, NU, NP, NY, NYN, #ng, #ngn> for Model {
                 const CONSTANT_RESIDUAL_JACOBIANS: bool = #constant_jacobians;
                 const CONSTANT_STAGE_RESIDUAL_JACOBIANS: bool = #constant_stage_jacobians;
                 #hessian
@@ -348,6 +359,7 @@ impl Emitter<'_> {
 
     /// `Model::constraints` and `Model::terminal_constraints`, those the model has.
     fn model_constraints(&self) -> TokenStream {
+        let (ng, ngn) = (self.ng_qp(), self.ngn_qp());
         let stage = self.l.constraints.as_ref().map(|_| {
             quote! {
                 fn constraints(
@@ -355,9 +367,9 @@ impl Emitter<'_> {
                     x: &SVector<Real, NX>,
                     u: &SVector<Real, NU>,
                     p: &SVector<Real, NP>,
-                    cx: &mut SMatrix<Real, NG, NX>,
-                    cu: &mut SMatrix<Real, NG, NU>,
-                ) -> SVector<Real, NG> {
+                    cx: &mut SMatrix<Real, #ng, NX>,
+                    cu: &mut SMatrix<Real, #ng, NU>,
+                ) -> SVector<Real, #ng> {
                     functions::constraints(x, u, p, cx, cu)
                 }
             }
@@ -368,8 +380,8 @@ impl Emitter<'_> {
                     &self,
                     x: &SVector<Real, NX>,
                     p: &SVector<Real, NP>,
-                    cx: &mut SMatrix<Real, NGN, NX>,
-                ) -> SVector<Real, NGN> {
+                    cx: &mut SMatrix<Real, #ngn, NX>,
+                ) -> SVector<Real, #ngn> {
                     functions::terminal_constraints(x, p, cx)
                 }
             }

@@ -82,6 +82,8 @@ impl Emitter<'_> {
     /// `functions::constraints_hessian` and `terminal_constraints_hessian` (exact Hessian,
     /// those the model has rows for).
     pub(super) fn constraints_hessian_fns(&self, uses: &mut Uses) -> TokenStream {
+        // The runtime's rows: the model's, then any soft bounds' (linear, no curvature).
+        let (ng, ngn) = (self.ng_qp(), self.ngn_qp());
         let stage = self.l.constraints_hessian.as_ref().map(|f| {
             let body = body(f, self.s, &["hxx", "hux", "huu"], None, uses);
             quote! {
@@ -93,7 +95,7 @@ impl Emitter<'_> {
                     x: &SVector<Real, NX>,
                     u: &SVector<Real, NU>,
                     p: &SVector<Real, NP>,
-                    mu: &SVector<Real, NG>,
+                    mu: &SVector<Real, #ng>,
                     hxx: &mut SMatrix<Real, NX, NX>,
                     hux: &mut SMatrix<Real, NU, NX>,
                     huu: &mut SMatrix<Real, NU, NU>,
@@ -111,7 +113,7 @@ impl Emitter<'_> {
                 pub fn terminal_constraints_hessian(
                     x: &SVector<Real, NX>,
                     p: &SVector<Real, NP>,
-                    mu: &SVector<Real, NGN>,
+                    mu: &SVector<Real, #ngn>,
                     hxx: &mut SMatrix<Real, NX, NX>,
                 ) {
                     #body
@@ -171,6 +173,7 @@ impl Emitter<'_> {
 
     /// `Model::constraints_hessian` and `terminal_constraints_hessian`, those emitted.
     pub(super) fn model_constraints_hessian(&self) -> TokenStream {
+        let (ng, ngn) = (self.ng_qp(), self.ngn_qp());
         let stage = self.l.constraints_hessian.as_ref().map(|_| {
             quote! {
                 fn constraints_hessian(
@@ -178,7 +181,7 @@ impl Emitter<'_> {
                     x: &SVector<Real, NX>,
                     u: &SVector<Real, NU>,
                     p: &SVector<Real, NP>,
-                    mu: &SVector<Real, NG>,
+                    mu: &SVector<Real, #ng>,
                     hxx: &mut SMatrix<Real, NX, NX>,
                     hux: &mut SMatrix<Real, NU, NX>,
                     huu: &mut SMatrix<Real, NU, NU>,
@@ -193,7 +196,7 @@ impl Emitter<'_> {
                     &self,
                     x: &SVector<Real, NX>,
                     p: &SVector<Real, NP>,
-                    mu: &SVector<Real, NGN>,
+                    mu: &SVector<Real, #ngn>,
                     hxx: &mut SMatrix<Real, NX, NX>,
                 ) {
                     functions::terminal_constraints_hessian(x, p, mu, hxx)

@@ -14,8 +14,11 @@ mod c_run_time;
 mod constants;
 mod functions;
 mod general_cost;
+mod implicit;
 mod run_time;
 mod setters;
+mod soft_bounds;
+mod soft_bounds_api;
 mod solver;
 
 use proc_macro2::{Span, TokenStream};
@@ -33,6 +36,7 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
     let items = [
         e.imports(),
         e.dimensions(),
+        e.soft_bound_items(),
         e.named_ranges(),
         e.model_data(),
         e.functions_module(),
@@ -48,10 +52,10 @@ pub(crate) fn items(l: &Lowered, opts: &Options) -> TokenStream {
         e.x0_setter(),
         e.param_setters(),
         e.named_param_setters(),
-        setters::bounds_api(),
+        e.bounds_api(),
         e.guess_setter(),
         e.stage_guess_setters(),
-        e.soft_penalty_api(),
+        e.penalty_api(),
         e.phases(),
         e.getters(),
         e.read_outs(),
@@ -86,6 +90,7 @@ pub(crate) fn ffi(l: &Lowered, opts: &Options) -> TokenStream {
         c.settings_fns(),
         c.stage_guess_fns(),
         c.soft_penalty_fns(),
+        c.soft_bound_penalty_fns(),
         c.phases(),
         c.getters(),
         c.stats_getter(),

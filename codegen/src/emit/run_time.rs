@@ -174,9 +174,38 @@ impl Emitter<'_> {
         }
     }
 
+    /// `control_bound_multipliers` and `state_bound_multipliers` (with soft bounds,
+    /// `soft_bounds_api::soft_bound_multipliers`).
+    fn bound_multipliers(&self) -> TokenStream {
+        if self.has_soft_bounds() {
+            return super::soft_bounds_api::soft_bound_multipliers();
+        }
+        quote! {
+            /// The control bounds' multipliers of stage `k < N` in the last QP
+            /// (`mu_u - mu_l`: positive on an upper bound, negative on a lower one).
+            pub fn control_bound_multipliers(&self, k: usize) -> Option<[Real; NU]> {
+                self.rti.control_bound_multipliers(k).map(Into::into)
+            }
+
+            /// The model-state bounds' multipliers of stage `1 <= k <= N` in the last QP
+            /// (signs as [`control_bound_multipliers`](Self::control_bound_multipliers)).
+            pub fn state_bound_multipliers(&self, k: usize) -> Option<[Real; NX_MODEL]> {
+                self.rti.state_bound_multipliers(k).map(|v| core::array::from_fn(|i| v[i]))
+            }
+        }
+    }
+
     /// The read-outs: `cost`, `kkt_residual`, the slacks, the multipliers and `trajectory`.
     pub(super) fn read_outs(&self) -> TokenStream {
         let n1 = ul(self.l.n + 1);
+        let (sl, su) = (self.model_rows(quote!(l)), self.model_rows(quote!(u)));
+        let lam = if self.has_soft_bounds() {
+            quote!(|v| take_rows(&v, 0))
+        } else {
+            quote!(Into::into)
+        };
+        let lam_n = self.model_rows(quote!(self.rti.terminal_constraint_multipliers()));
+        let bound_multipliers = self.bound_multipliers();
         // The doc of a model without general terms as it was (its crate is unchanged).
         let cost_doc = if self.l.general_cost.is_some() {
             quote! {
@@ -207,13 +236,13 @@ impl Emitter<'_> {
             /// Lower and upper slacks `(sl, su)` of stage `k < N`'s general constraints in
             /// the last QP (zero for hard rows).
             pub fn slacks(&self, k: usize) -> Option<([Real; NG], [Real; NG])> {
-                self.rti.slacks(k).map(|(l, u)| (l.into(), u.into()))
+                self.rti.slacks(k).map(|(l, u)| (#sl, #su))
             }
 
             /// Lower and upper slacks of the terminal constraints in the last QP.
             pub fn terminal_slacks(&self) -> ([Real; NGN], [Real; NGN]) {
                 let (l, u) = self.rti.terminal_slacks();
-                (l.into(), u.into())
+                (#sl, #su)
             }
 
             /// The dynamics multipliers `pi_k` (`k < N`, model states) of the last QP.
@@ -221,28 +250,18 @@ impl Emitter<'_> {
                 self.rti.dynamics_multipliers(k).map(|v| core::array::from_fn(|i| v[i]))
             }
 
-            /// The control bounds' multipliers of stage `k < N` in the last QP
-            /// (`mu_u - mu_l`: positive on an upper bound, negative on a lower one).
-            pub fn control_bound_multipliers(&self, k: usize) -> Option<[Real; NU]> {
-                self.rti.control_bound_multipliers(k).map(Into::into)
-            }
-
-            /// The model-state bounds' multipliers of stage `1 <= k <= N` in the last QP
-            /// (signs as [`control_bound_multipliers`](Self::control_bound_multipliers)).
-            pub fn state_bound_multipliers(&self, k: usize) -> Option<[Real; NX_MODEL]> {
-                self.rti.state_bound_multipliers(k).map(|v| core::array::from_fn(|i| v[i]))
-            }
+            #bound_multipliers
 
             /// The general constraints' multipliers of stage `k < N` in the last QP
             /// (`lam_u - lam_l`; the interior point's, see
             /// [`Rti::constraint_multipliers`](mpc_runtime::Rti::constraint_multipliers)).
             pub fn constraint_multipliers(&self, k: usize) -> Option<[Real; NG]> {
-                self.rti.constraint_multipliers(k).map(Into::into)
+                self.rti.constraint_multipliers(k).map(#lam)
             }
 
             /// The terminal constraints' multipliers in the last QP.
             pub fn terminal_constraint_multipliers(&self) -> [Real; NGN] {
-                self.rti.terminal_constraint_multipliers().into()
+                #lam_n
             }
 
             /// Copies the whole predicted trajectory: model states `x[0..=N]` and controls

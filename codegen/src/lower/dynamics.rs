@@ -1,10 +1,10 @@
 //! Lowering the dynamics: discretized with their sensitivities, the functions `dynamics`
 //! and `dynamics value`, and the dynamics' Lagrangian Hessian.
 
-use mpc_dsl::ocp::{Dynamics, Integrator};
-use mpc_dsl::{Graph, Matrix, Ocp, Vector};
+use mpc_dsl::ocp::{Collocation, Dynamics, Integrator};
+use mpc_dsl::{DslError, Graph, Matrix, Ocp, Vector};
 
-use super::{Arg, Builder, Function, Symbols, Target};
+use super::{Arg, Builder, Function, IrkStep, Symbols, Target};
 use crate::error::CodegenError;
 
 /// The model's dynamics over one interval: `F` and its sensitivity.
@@ -39,9 +39,68 @@ pub(super) fn discretize<'g>(
             match integrator {
                 Integrator::Euler => euler(v, xdot, &fx, &fu, s0, ocp.horizon.dt),
                 Integrator::Rk4 { steps } => rk4(v, xdot, &fx, &fu, s0, (*steps, ocp.horizon.dt)),
+                // Lowered by `irk_functions`: the step is emitted, not an expression.
+                Integrator::Irk { .. } => Err(CodegenError::Dsl(DslError::NoClosedForm {
+                    what: "the discrete map of an irk (implicit) integrator",
+                })),
             }
         }
     }
+}
+
+/// The settings of the model's implicit integrator, if it has one.
+pub(super) fn irk_of(ocp: &Ocp<'_>) -> Option<IrkStep> {
+    match ocp.dynamics {
+        Dynamics::Continuous {
+            integrator:
+                Integrator::Irk {
+                    stages,
+                    steps,
+                    newton,
+                    collocation,
+                },
+            ..
+        } => Some(IrkStep {
+            stages,
+            steps,
+            newton,
+            radau: collocation == Collocation::RadauIia,
+        }),
+        _ => None,
+    }
+}
+
+/// The functions of an implicit step: the right-hand side `f(x, u, p)` over the model's
+/// states with `fx = df/dx` and `fu = df/du` (what the emitted Newton iteration and
+/// sensitivity solve evaluate at the stage points), `f` alone, no Hessian, and the
+/// discretization in words. The step itself is emitted around them (`emit/implicit.rs`).
+#[allow(clippy::type_complexity)]
+pub(super) fn irk_functions<'g>(
+    ocp: &Ocp<'g>,
+    v: &Symbols<'g>,
+    step: IrkStep,
+) -> Result<(Function, Function, Option<Function>, String), CodegenError> {
+    let xdot = ocp.dynamics.exprs();
+    let b = v.model_builder();
+    let (rhs, _) = b.with_jacobian("dynamics right-hand side", xdot, "fx", Some("fu"))?;
+    let value_out = (xdot.iter().enumerate())
+        .map(|(i, &e)| (e, Target::Ret(i)))
+        .collect();
+    let args = [Arg::X, Arg::U, Arg::P];
+    let value = b.function("dynamics right-hand side", &args, value_out)?;
+    let how = format!(
+        "{} IRK, {} stage(s), {} substep(s), {} Newton iteration(s) each, sensitivities by \
+         the implicit function theorem",
+        if step.radau {
+            "Radau IIA"
+        } else {
+            "Gauss-Legendre"
+        },
+        step.stages,
+        step.steps,
+        step.newton
+    );
+    Ok((rhs, value, None, how))
 }
 
 /// The sensitivity `[I 0]` of the initial state over `(x0, u)`.

@@ -23,7 +23,8 @@
 //!   expressions of parameters inside the residual, so the runtime's own reference is zero.
 //!   Weights may depend on global parameters; they are a separate function of `p`.
 //! - **Constraints**: path and terminal general constraints stacked, with their Jacobians,
-//!   bounds and slack penalties (`0, 0` for a hard row).
+//!   bounds and slack penalties (`0, 0` for a hard row), then the soft box bounds' rows
+//!   (`soft_bounds.rs`: `h = u_j`, `h = x_j` and `h_N = x_j`).
 //!
 //! The steps are in [`lower_with`], in order: the symbols, the dynamics (`dynamics.rs`), the
 //! cost (`cost.rs`), the constraints (`constraints.rs`), the constant data (`data.rs`).
@@ -33,6 +34,9 @@ mod cost;
 mod data;
 mod dynamics;
 mod general_cost;
+mod soft_bounds;
+
+pub use soft_bounds::SoftBounds;
 
 use mpc_dsl::ocp::{ParamKind, Stage, Variable};
 use mpc_dsl::{DslError, Expr, Graph, Ocp, Program, Vector};
@@ -41,7 +45,7 @@ use crate::error::CodegenError;
 use constraints::StackedConstraints;
 use cost::{lower_cost, weights_read_u_prev};
 use data::{guesses, named, state_bounds, u_prev_entries};
-use dynamics::{discretize, dynamics_functions, dynamics_hessian};
+use dynamics::{discretize, dynamics_functions, dynamics_hessian, irk_functions, irk_of};
 pub use general_cost::GeneralCostFunctions;
 use general_cost::{constraints_hessian, general_cost};
 
@@ -78,6 +82,19 @@ pub struct Function {
     pub inputs: Vec<(Arg, usize)>,
     /// Where each program output goes.
     pub outputs: Vec<Target>,
+}
+
+/// An implicit (collocation) step's settings, as in the model.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct IrkStep {
+    /// Collocation stages (1 to 3).
+    pub stages: usize,
+    /// Substeps per interval.
+    pub steps: usize,
+    /// Newton iterations per substep.
+    pub newton: usize,
+    /// Radau IIA collocation (Gauss-Legendre otherwise).
+    pub radau: bool,
 }
 
 /// A named block of rows (of the residual or of the constraints), for documentation.
@@ -137,10 +154,15 @@ pub struct Lowered {
     pub dt: f64,
     /// How the dynamics are discretized, in words.
     pub discretization: String,
-    /// `F`, `A`, `B`.
+    /// `F`, `A`, `B`; with [`irk`](Self::irk), the ODE's right-hand side instead:
+    /// `f(x, u, p)` over the model's states with `fx = df/dx`, `fu = df/du`, which the
+    /// emitted implicit step evaluates at its stage points.
     pub dynamics: Function,
-    /// `F` alone.
+    /// `F` alone; with [`irk`](Self::irk), `f(x, u, p)` alone.
     pub dynamics_value: Function,
+    /// The implicit integrator's settings, when the model integrates with `irk`: the step is
+    /// then emitted as a call of `mpc_runtime::implicit` around [`dynamics`](Self::dynamics).
+    pub irk: Option<IrkStep>,
     /// The Hessian of `pi' F(x, u, p)` over `(x, u)`, as `hxx`, `hux`, `huu` (with
     /// [`lower_with`]'s `exact_hessian`).
     pub dynamics_hessian: Option<Function>,
@@ -216,6 +238,9 @@ pub struct Lowered {
     /// Whether the weights depend on the `u_prev` parameters (then the automatic update after
     /// each feedback re-evaluates them).
     pub weights_use_u_prev: bool,
+    /// The soft state and control bounds, lowered to the last general rows (`ng`, `ngn`,
+    /// the bounds and penalties above count them; the box bounds above do not).
+    pub soft_bounds: SoftBounds,
 }
 
 /// Compiles expressions over the symbols of some arguments into [`Function`]s.
@@ -346,23 +371,38 @@ pub fn lower_with<'g>(ocp: &Ocp<'g>, exact_hessian: bool) -> Result<Lowered, Cod
     ocp.validate().map_err(CodegenError::Invalid)?;
     let v = Symbols::new(ocp, exact_hessian)?;
     let b = v.builder();
-    let map = discretize(ocp, &v)?;
-    let (dynamics, dynamics_value) = dynamics_functions(ocp, &v, &b, &map)?;
-    let dynamics_hessian = if exact_hessian {
-        Some(dynamics_hessian(&v, &b, &map.x_next)?)
-    } else {
-        None
+    let irk = irk_of(ocp);
+    let (dynamics, dynamics_value, dynamics_hessian, discretization) = match irk {
+        Some(_) if exact_hessian => return Err(CodegenError::ExactHessianWithIrk),
+        Some(step) => irk_functions(ocp, &v, step)?,
+        None => {
+            let map = discretize(ocp, &v)?;
+            let (dynamics, dynamics_value) = dynamics_functions(ocp, &v, &b, &map)?;
+            let hessian = if exact_hessian {
+                Some(dynamics_hessian(&v, &b, &map.x_next)?)
+            } else {
+                None
+            };
+            (dynamics, dynamics_value, hessian, map.how)
+        }
     };
     let cost = lower_cost(ocp, &v, &b)?;
-    let path = StackedConstraints::of(ocp, Stage::Path);
-    let terminal = StackedConstraints::of(ocp, Stage::Terminal);
+    let mut path = StackedConstraints::of(ocp, Stage::Path);
+    let mut terminal = StackedConstraints::of(ocp, Stage::Terminal);
+    let soft_bounds = soft_bounds::append_soft_bounds(ocp, &mut path, &mut terminal);
     let constraints = (!path.h.is_empty())
         .then(|| b.with_jacobian("constraints", &path.h, "cx", Some("cu")))
         .transpose()?;
     let terminal_constraints = (!terminal.h.is_empty())
         .then(|| b.with_jacobian("terminal constraints", &terminal.h, "cx", None))
         .transpose()?;
-    let (lbx, ubx) = state_bounds(ocp, &v);
+    let (mut lbx, mut ubx) = state_bounds(ocp, &v);
+    soft_bounds::hard_only(&ocp.state_bounds, &mut lbx, &mut ubx);
+    let (mut lbu, mut ubu) = (
+        ocp.control_bounds.lower.clone(),
+        ocp.control_bounds.upper.clone(),
+    );
+    soft_bounds::hard_only(&ocp.control_bounds, &mut lbu, &mut ubu);
     let (x_guess, u_guess) = guesses(ocp);
     let u_prev = u_prev_entries(ocp, &v)?;
     let weights_use_u_prev = (u_prev.as_deref())
@@ -392,9 +432,10 @@ pub fn lower_with<'g>(ocp: &Ocp<'g>, exact_hessian: bool) -> Result<Lowered, Cod
         ngn: terminal.h.len(),
         n: ocp.horizon.n,
         dt: ocp.horizon.dt,
-        discretization: map.how,
+        discretization,
         dynamics,
         dynamics_value,
+        irk,
         dynamics_hessian,
         residual: cost.residual,
         terminal_residual: cost.terminal_residual,
@@ -412,8 +453,8 @@ pub fn lower_with<'g>(ocp: &Ocp<'g>, exact_hessian: bool) -> Result<Lowered, Cod
         terminal_constraint_rows: terminal.rows,
         lbx,
         ubx,
-        lbu: ocp.control_bounds.lower.clone(),
-        ubu: ocp.control_bounds.upper.clone(),
+        lbu,
+        ubu,
         lg: path.lower,
         ug: path.upper,
         lgn: terminal.lower,
@@ -432,6 +473,7 @@ pub fn lower_with<'g>(ocp: &Ocp<'g>, exact_hessian: bool) -> Result<Lowered, Cod
             named(&vars, |i| ocp.parameters[i].kind == ParamKind::Stage)
         },
         u_prev,
+        soft_bounds,
     })
 }
 

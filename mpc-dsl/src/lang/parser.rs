@@ -4,7 +4,9 @@ use std::collections::HashMap;
 
 use crate::graph::{Expr, Graph};
 use crate::linalg::{Matrix, Vector};
-use crate::ocp::{Decl, Integrator, OcpBuilder, OcpError, ParamKind, Slack, Stage};
+use crate::ocp::{Collocation, Decl, Integrator, OcpBuilder, OcpError, ParamKind, Slack, Stage};
+
+mod soft;
 
 use super::lexer::{Span, Tok, lex};
 use super::value::{MAX_DIM, Val, call, mul, zip};
@@ -337,6 +339,70 @@ impl<'s, 'g> Parser<'s, 'g> {
         Ok(())
     }
 
+    /// The options of `irk`: nothing, or `(name = value, ...)` with the counts `stages`,
+    /// `steps` and `newton` and `collocation = gauss_legendre | radau_iia`, each at most
+    /// once, in any order (defaults 2, 1, 3, Gauss-Legendre). The counts' ranges are checked
+    /// by validation, located at the integrator.
+    fn irk_options(&mut self) -> PResult<Integrator> {
+        let (mut stages, mut steps, mut newton) = (None, None, None);
+        let mut collocation = None;
+        if self.peek() == Some(&Tok::LParen) {
+            self.pos += 1;
+            loop {
+                let (key, kspan) = self.ident("`stages`, `steps`, `newton` or `collocation`")?;
+                let given = match key.as_str() {
+                    "stages" => stages.is_some(),
+                    "steps" => steps.is_some(),
+                    "newton" => newton.is_some(),
+                    "collocation" => collocation.is_some(),
+                    other => {
+                        return Err(syntax(
+                            kspan,
+                            format!(
+                                "unknown irk option `{other}`: the options are `stages`, \
+                                 `steps`, `newton` and `collocation`"
+                            ),
+                        ));
+                    }
+                };
+                if given {
+                    return Err(semantic(kspan, format!("irk option `{key}` given twice")));
+                }
+                self.expect(&Tok::Eq, "`=`")?;
+                match key.as_str() {
+                    "collocation" => collocation = Some(self.collocation()?),
+                    "stages" => stages = Some(self.count("irk `stages`")?),
+                    "steps" => steps = Some(self.count("irk `steps`")?),
+                    _ => newton = Some(self.count("irk `newton`")?),
+                }
+                if self.peek() != Some(&Tok::Comma) {
+                    break;
+                }
+                self.pos += 1;
+            }
+            self.expect(&Tok::RParen, "`)`")?;
+        }
+        Ok(Integrator::Irk {
+            stages: stages.unwrap_or(2),
+            steps: steps.unwrap_or(1),
+            newton: newton.unwrap_or(3),
+            collocation: collocation.unwrap_or_default(),
+        })
+    }
+
+    /// `gauss_legendre` or `radau_iia`.
+    fn collocation(&mut self) -> PResult<Collocation> {
+        let (name, span) = self.ident("`gauss_legendre` or `radau_iia`")?;
+        match name.as_str() {
+            "gauss_legendre" => Ok(Collocation::GaussLegendre),
+            "radau_iia" => Ok(Collocation::RadauIia),
+            other => Err(syntax(
+                span,
+                format!("unknown collocation `{other}`: use `gauss_legendre` or `radau_iia`"),
+            )),
+        }
+    }
+
     fn count(&mut self, what: &str) -> PResult<usize> {
         let (v, span) = self.const_scalar(what)?;
         if v.fract() != 0.0 || !(0.0..=MAX_DIM as f64).contains(&v) {
@@ -534,7 +600,7 @@ impl<'s, 'g> Parser<'s, 'g> {
         let mut integrator = Integrator::Rk4 { steps: 1 };
         if !discrete {
             let ispan = self.span();
-            let (name, _) = self.ident("an integrator (`rk4` or `euler`)")?;
+            let (name, _) = self.ident("an integrator (`rk4`, `euler` or `irk`)")?;
             integrator = match name.as_str() {
                 "rk4" => {
                     let mut steps = 1;
@@ -546,10 +612,14 @@ impl<'s, 'g> Parser<'s, 'g> {
                     Integrator::Rk4 { steps }
                 }
                 "euler" => Integrator::Euler,
+                "irk" => self.irk_options()?,
                 other => {
                     return Err(syntax(
                         ispan,
-                        format!("unknown integrator `{other}`: use `rk4`, `rk4(k)` or `euler`"),
+                        format!(
+                            "unknown integrator `{other}`: use `rk4`, `rk4(k)`, `euler` or \
+                             `irk(stages = s, steps = k, newton = n)`"
+                        ),
                     ));
                 }
             };
@@ -808,7 +878,12 @@ impl<'s, 'g> Parser<'s, 'g> {
         self.expect(&Tok::Comma, "`,`")?;
         let (hi, hspan) = self.const_values("the upper bound")?;
         self.expect(&Tok::RBracket, "`]`")?;
-        self.expect(&Tok::Semi, "`;`")?;
+        let soft = if self.eat_kw("soft") {
+            Some(self.box_soft(&name, syms.len())?)
+        } else {
+            None
+        };
+        self.expect(&Tok::Semi, "`;` (or `soft`)")?;
         let n = syms.len();
         let fit = |v: Vec<f64>, span: Span| -> PResult<Vec<f64>> {
             match v.len() {
@@ -834,8 +909,19 @@ impl<'s, 'g> Parser<'s, 'g> {
                 .insert(format!("{what} on `{s}` (lower)"), span.clone());
             self.spans
                 .insert(format!("{what} on `{s}` (upper)"), span.clone());
+            if soft.is_some() {
+                self.spans
+                    .insert(format!("soft {what} on `{s}`"), span.clone());
+                (self.spans).insert(
+                    format!("slack penalty of soft {what} on `{s}`"),
+                    span.clone(),
+                );
+            }
         }
-        self.b.bound_each(&syms, &lo, &hi);
+        match soft {
+            Some(slacks) => self.b.soft_bound_each(&syms, &lo, &hi, &slacks),
+            None => self.b.bound_each(&syms, &lo, &hi),
+        };
         Ok(())
     }
 
@@ -1316,7 +1402,9 @@ impl<'s, 'g> Parser<'s, 'g> {
                             OcpError::ZeroHorizon | OcpError::NonPositiveDt { .. } => {
                                 horizon_span.clone()
                             }
-                            OcpError::ZeroSubsteps => locate(Some("integrator")),
+                            OcpError::ZeroSubsteps
+                            | OcpError::IrkStages { .. }
+                            | OcpError::IrkZero { .. } => locate(Some("integrator")),
                             OcpError::UnknownSymbol { item, .. } => locate(Some(item)),
                             other => locate(other.culprit()),
                         };

@@ -101,6 +101,16 @@ impl Decl {
     }
 }
 
+/// One call of [`OcpBuilder::bound_each`] or [`OcpBuilder::soft_bound_each`].
+#[derive(Debug)]
+struct BoundRequest<'g> {
+    symbols: Vec<Expr<'g>>,
+    lower: Vec<f64>,
+    upper: Vec<f64>,
+    /// The slack penalties of each entry, for a soft bound.
+    soft: Option<Vec<Slack>>,
+}
+
 /// Builds an [`Ocp`]. Methods record what they are given; [`build`](Self::build) validates
 /// everything at once and reports every error.
 #[derive(Debug)]
@@ -109,7 +119,7 @@ pub struct OcpBuilder<'g> {
     ocp: Ocp<'g>,
     has_dynamics: bool,
     has_horizon: bool,
-    bound_requests: Vec<(Vec<Expr<'g>>, Vec<f64>, Vec<f64>)>,
+    bound_requests: Vec<BoundRequest<'g>>,
     errors: Vec<OcpError>,
 }
 
@@ -179,7 +189,12 @@ impl<'g> OcpBuilder<'g> {
         self.param(decl, ParamKind::Global)
     }
 
-    /// Continuous dynamics `xdot = f(x, u, p)`, one expression per state entry.
+    /// Continuous dynamics `xdot = f(x, u, p)`, one expression per state entry, discretized
+    /// by `integrator`: [`Integrator::Rk4`], or for stiff dynamics the implicit
+    /// [`Integrator::Irk`] (e.g. [`Integrator::gauss_legendre`]`(2)`). Its settings are checked
+    /// by [`build`](Self::build): [`OcpError::IrkStages`] for stages outside 1..=3,
+    /// [`OcpError::IrkZero`] for zero substeps or Newton iterations (from a `.mpc` file,
+    /// located at the integrator).
     pub fn ode(&mut self, xdot: &[Expr<'g>], integrator: Integrator) -> &mut Self {
         self.set_dynamics(Dynamics::Continuous {
             xdot: xdot.iter().copied().collect(),
@@ -284,8 +299,43 @@ impl<'g> OcpBuilder<'g> {
 
     /// Box bounds with one lower and one upper value per symbol.
     pub fn bound_each(&mut self, symbols: &[Expr<'g>], lower: &[f64], upper: &[f64]) -> &mut Self {
-        self.bound_requests
-            .push((symbols.to_vec(), lower.to_vec(), upper.to_vec()));
+        self.bound_requests.push(BoundRequest {
+            symbols: symbols.to_vec(),
+            lower: lower.to_vec(),
+            upper: upper.to_vec(),
+            soft: None,
+        });
+        self
+    }
+
+    /// Soft box bound `lower <= s <= upper` on every state or control symbol in `symbols`,
+    /// its violation penalized with `slack` (like a soft general constraint's; a state
+    /// bound on stages `1..=N`, a control bound on `k < N`).
+    pub fn soft_bound(
+        &mut self,
+        symbols: &[Expr<'g>],
+        lower: f64,
+        upper: f64,
+        slack: Slack,
+    ) -> &mut Self {
+        let n = symbols.len();
+        self.soft_bound_each(symbols, &vec![lower; n], &vec![upper; n], &vec![slack; n])
+    }
+
+    /// Soft box bounds with one lower and upper value and one pair of penalties per symbol.
+    pub fn soft_bound_each(
+        &mut self,
+        symbols: &[Expr<'g>],
+        lower: &[f64],
+        upper: &[f64],
+        slacks: &[Slack],
+    ) -> &mut Self {
+        self.bound_requests.push(BoundRequest {
+            symbols: symbols.to_vec(),
+            lower: lower.to_vec(),
+            upper: upper.to_vec(),
+            soft: Some(slacks.to_vec()),
+        });
         self
     }
 
@@ -363,30 +413,8 @@ impl<'g> OcpBuilder<'g> {
         self.ocp.control_bounds = Bounds::unbounded(nu);
         let x = self.ocp.x();
         let u = self.ocp.u();
-        for (syms, lo, hi) in std::mem::take(&mut self.bound_requests) {
-            if lo.len() != syms.len() || hi.len() != syms.len() {
-                self.errors.push(OcpError::DimensionMismatch {
-                    item: "box bound".into(),
-                    found: format!("{} lower and {} upper values", lo.len(), hi.len()),
-                    expected: format!("{} (one per bounded entry)", syms.len()),
-                });
-                continue;
-            }
-            for ((s, l), h) in syms.iter().zip(lo).zip(hi) {
-                let (bounds, idx) = if let Some(i) = x.iter().position(|e| e == s) {
-                    (&mut self.ocp.state_bounds, i)
-                } else if let Some(i) = u.iter().position(|e| e == s) {
-                    (&mut self.ocp.control_bounds, i)
-                } else {
-                    self.errors.push(OcpError::NotAVariable {
-                        item: "box bound".into(),
-                        name: s.to_string(),
-                    });
-                    continue;
-                };
-                bounds.lower[idx] = l;
-                bounds.upper[idx] = h;
-            }
+        for r in std::mem::take(&mut self.bound_requests) {
+            self.apply_bounds(r, &x, &u);
         }
         let result = self.ocp.validate();
         match result {
@@ -415,6 +443,41 @@ impl<'g> OcpBuilder<'g> {
                 e.errors = self.errors;
                 Err(e)
             }
+        }
+    }
+
+    /// Writes one bound request into the problem's state or control bounds.
+    fn apply_bounds(&mut self, r: BoundRequest<'g>, x: &[Expr<'g>], u: &[Expr<'g>]) {
+        let n = r.symbols.len();
+        let soft_len = r.soft.as_ref().map_or(n, Vec::len);
+        if r.lower.len() != n || r.upper.len() != n || soft_len != n {
+            self.errors.push(OcpError::DimensionMismatch {
+                item: "box bound".into(),
+                found: format!(
+                    "{} lower and {} upper values ({} slack penalties)",
+                    r.lower.len(),
+                    r.upper.len(),
+                    soft_len
+                ),
+                expected: format!("{n} (one per bounded entry)"),
+            });
+            return;
+        }
+        for (i, s) in r.symbols.iter().enumerate() {
+            let (bounds, idx) = if let Some(j) = x.iter().position(|e| e == s) {
+                (&mut self.ocp.state_bounds, j)
+            } else if let Some(j) = u.iter().position(|e| e == s) {
+                (&mut self.ocp.control_bounds, j)
+            } else {
+                self.errors.push(OcpError::NotAVariable {
+                    item: "box bound".into(),
+                    name: s.to_string(),
+                });
+                continue;
+            };
+            bounds.lower[idx] = r.lower[i];
+            bounds.upper[idx] = r.upper[i];
+            bounds.soft[idx] = r.soft.as_ref().map(|v| v[i]);
         }
     }
 

@@ -21,7 +21,8 @@
 //! - Parameters are [`ParamKind::Stage`] (one value per stage `0..=N`: references) or
 //!   [`ParamKind::Global`] (one value for the whole horizon: masses, weights).
 //! - Box bounds on controls hold on `k < N`; box bounds on states on `1 <= k <= N`.
-//!   Infinite bounds mean "no bound". General constraints `lh <= h(x, u, p) <= uh` hold on
+//!   Infinite bounds mean "no bound". A bound may be soft ([`Bounds::soft`]): its violation
+//!   is penalized like a soft general constraint's. General constraints `lh <= h(x, u, p) <= uh` hold on
 //!   `k < N` ([`Stage::Path`]) or at `N` ([`Stage::Terminal`]); a soft one gets slacks with
 //!   the given L1 and L2 penalties.
 
@@ -92,6 +93,48 @@ pub enum Integrator {
     },
     /// Explicit Euler, one step (for tests).
     Euler,
+    /// Implicit Runge-Kutta: collocation with `stages` stages ([`Collocation`]), `steps`
+    /// equal substeps per interval, and a fixed number of `newton` iterations per substep (as
+    /// acados' IRK: `sim_method_num_stages`, `sim_method_num_steps`,
+    /// `sim_method_newton_iter`, `collocation_type`). The step has no closed-form expression:
+    /// code generators emit a Newton solve ([`Ocp::discrete_map`] refuses it).
+    Irk {
+        /// Collocation stages, [`Integrator::IRK_MAX_STAGES`] at most.
+        stages: usize,
+        /// Substeps per interval (at least 1).
+        steps: usize,
+        /// Newton iterations per substep (at least 1).
+        newton: usize,
+        /// The collocation points.
+        collocation: Collocation,
+    },
+}
+
+/// The collocation points of an [`Integrator::Irk`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Collocation {
+    /// Gauss-Legendre: order `2 s`, A-stable (acados' default).
+    #[default]
+    GaussLegendre,
+    /// Radau IIA: order `2 s - 1`, L-stable (transients much faster than a step are damped
+    /// out, not only kept bounded).
+    RadauIia,
+}
+
+impl Integrator {
+    /// The most collocation stages an [`Integrator::Irk`] may have.
+    pub const IRK_MAX_STAGES: usize = 3;
+
+    /// Gauss-Legendre collocation with `stages` stages, one substep and three Newton
+    /// iterations (acados' defaults for `sim_method_num_steps` and `sim_method_newton_iter`).
+    pub fn gauss_legendre(stages: usize) -> Integrator {
+        Integrator::Irk {
+            stages,
+            steps: 1,
+            newton: 3,
+            collocation: Collocation::GaussLegendre,
+        }
+    }
 }
 
 /// The dynamics.
@@ -239,13 +282,16 @@ pub struct Constraint<'g> {
     pub soft: Option<Slack>,
 }
 
-/// Component-wise box bounds.
+/// Component-wise box bounds, each hard or soft.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Bounds {
     /// Lower bounds, `-inf` where unbounded.
     pub lower: Vec<f64>,
     /// Upper bounds, `+inf` where unbounded.
     pub upper: Vec<f64>,
+    /// Per entry, `Some` for a soft bound with its slack penalties (`l1 s + 1/2 l2 s^2` on
+    /// the violation `s` of either side), `None` for a hard one.
+    pub soft: Vec<Option<Slack>>,
 }
 
 impl Bounds {
@@ -254,7 +300,15 @@ impl Bounds {
         Bounds {
             lower: vec![f64::NEG_INFINITY; n],
             upper: vec![f64::INFINITY; n],
+            soft: vec![None; n],
         }
+    }
+
+    /// The entries whose bound is soft, in order (acados' `idxsbx`/`idxsbu`).
+    pub fn soft_entries(&self) -> Vec<usize> {
+        (self.soft.iter().enumerate())
+            .filter_map(|(i, s)| s.map(|_| i))
+            .collect()
     }
 
     /// Indices with at least one finite side: the bounds a solver must enforce.
@@ -488,7 +542,8 @@ impl<'g> Ocp<'g> {
     ///
     /// # Errors
     /// [`DslError::DimensionMismatch`](crate::DslError::DimensionMismatch) if the dynamics
-    /// do not have one entry per state (validation reports that first).
+    /// do not have one entry per state (validation reports that first);
+    /// [`DslError::NoClosedForm`](crate::DslError::NoClosedForm) for [`Integrator::Irk`].
     pub fn discrete_map(&self) -> crate::Result<Vector<'g>> {
         let x = self.x();
         let f = self.dynamics.exprs();
@@ -510,6 +565,12 @@ impl<'g> Ocp<'g> {
                 integrator: Integrator::Rk4 { steps },
                 ..
             } => crate::models::rk4(&x, self.horizon.dt, steps, rhs),
+            Dynamics::Continuous {
+                integrator: Integrator::Irk { .. },
+                ..
+            } => Err(crate::DslError::NoClosedForm {
+                what: "the discrete map of an irk (implicit) integrator",
+            }),
         }
     }
 }

@@ -98,6 +98,21 @@ pub enum OcpError {
     /// RK4 with zero substeps.
     #[error("integrator rk4 with 0 substeps: use at least 1")]
     ZeroSubsteps,
+    /// An `irk` integrator with a number of stages it does not have a tableau for.
+    #[error(
+        "integrator irk with {stages} stages: collocation is available with 1, 2 or 3 stages \
+         (Gauss-Legendre: order 2, 4, 6; Radau IIA: order 1, 3, 5)"
+    )]
+    IrkStages {
+        /// The stages asked for.
+        stages: usize,
+    },
+    /// An `irk` integrator with zero substeps or zero Newton iterations.
+    #[error("integrator irk with 0 {what}: use at least 1")]
+    IrkZero {
+        /// `substeps` or `Newton iterations`.
+        what: &'static str,
+    },
     /// Something required is missing.
     #[error("no {what} given: the problem needs one")]
     Missing {
@@ -143,6 +158,21 @@ pub enum OcpError {
         /// The value.
         value: f64,
     },
+    /// A soft box bound whose penalties are both zero (it would be a hard bound).
+    #[error(
+        "{item}: soft with l1 = 0 and l2 = 0 penalizes nothing; give a positive penalty, \
+         or drop `soft` for a hard bound"
+    )]
+    ZeroPenalties {
+        /// The bounded entry, e.g. `soft state bound on `v``.
+        item: String,
+    },
+    /// A soft box bound on an entry with no finite bound.
+    #[error("{item}: soft on an entry without a finite bound; give a finite lower or upper bound")]
+    SoftUnbounded {
+        /// The bounded entry.
+        item: String,
+    },
 }
 
 impl OcpError {
@@ -160,6 +190,8 @@ impl OcpError {
             | OcpError::NonFinite { item, .. }
             | OcpError::IllegalDependence { item, .. }
             | OcpError::NegativePenalty { item, .. }
+            | OcpError::ZeroPenalties { item }
+            | OcpError::SoftUnbounded { item }
             | OcpError::NotAVariable { item, .. } => Some(item),
             _ => None,
         }
@@ -514,6 +546,29 @@ impl<'g> Checker<'_, 'g> {
         {
             self.errors.push(OcpError::ZeroSubsteps);
         }
+        if let Dynamics::Continuous {
+            integrator:
+                Integrator::Irk {
+                    stages,
+                    steps,
+                    newton,
+                    ..
+                },
+            ..
+        } = ocp.dynamics
+        {
+            if !(1..=Integrator::IRK_MAX_STAGES).contains(&stages) {
+                self.errors.push(OcpError::IrkStages { stages });
+            }
+            if steps == 0 {
+                self.errors.push(OcpError::IrkZero { what: "substeps" });
+            }
+            if newton == 0 {
+                self.errors.push(OcpError::IrkZero {
+                    what: "Newton iterations",
+                });
+            }
+        }
         if self.len("the dynamics", dyn_exprs.len(), ocp.nx(), "the state") {
             self.exprs("the dynamics", dyn_exprs, &PATH_ROLES, "");
         }
@@ -586,6 +641,51 @@ impl<'g> Checker<'_, 'g> {
                 nu,
                 "the control",
             );
+        }
+        self.soft_bounds("state", &ocp.state_bounds, &names(&ocp.states));
+        self.soft_bounds("control", &ocp.control_bounds, &names(&ocp.controls));
+    }
+
+    /// The soft entries of state or control bounds (`what`): one slack per entry, finite
+    /// non-negative penalties not both zero, and a finite bound to soften.
+    fn soft_bounds(&mut self, what: &str, b: &Bounds, names: &[String]) {
+        if b.soft.len() != b.lower.len() {
+            self.len(
+                &format!("{what} bound slacks"),
+                b.soft.len(),
+                b.lower.len(),
+                &format!("the {what}"),
+            );
+            return;
+        }
+        for (i, s) in b.soft.iter().enumerate() {
+            let Some(s) = s else { continue };
+            let name = names
+                .get(i)
+                .cloned()
+                .unwrap_or_else(|| format!("entry {i}"));
+            let item = format!("soft {what} bound on `{name}`");
+            for v in [s.l1, s.l2] {
+                if !v.is_finite() {
+                    self.errors.push(OcpError::NonFinite {
+                        item: format!("slack penalty of {item}"),
+                        value: v,
+                    });
+                } else if v < 0.0 {
+                    self.errors.push(OcpError::NegativePenalty {
+                        item: item.clone(),
+                        value: v,
+                    });
+                }
+            }
+            if s.l1 == 0.0 && s.l2 == 0.0 {
+                self.errors
+                    .push(OcpError::ZeroPenalties { item: item.clone() });
+            }
+            let finite = |v: Option<&f64>| v.is_some_and(|v| v.is_finite());
+            if !finite(b.lower.get(i)) && !finite(b.upper.get(i)) {
+                self.errors.push(OcpError::SoftUnbounded { item });
+            }
         }
     }
 

@@ -128,3 +128,28 @@ pub fn generated_step_f64(
     let info = s.feedback();
     (info.status == quadrotor_rates::RtiStatus::Ok).then(|| s.u0())
 }
+
+/// One control step and a full SQP of the generated stiff model, whose dynamics are the
+/// implicit `irk` step (`mpc_runtime::implicit`), in `f32`.
+pub fn stiff_step_f32(
+    s: &mut stiff_actuator_f32::Solver,
+    x0: &[f32; stiff_actuator_f32::NX_MODEL],
+) -> Option<[f32; stiff_actuator_f32::NU]> {
+    s.prepare();
+    s.set_x0(x0).ok()?;
+    let info = s.feedback();
+    let _ = s.solve_sqp();
+    (info.status == stiff_actuator_f32::RtiStatus::Ok).then(|| s.u0())
+}
+
+/// The same in `f64`.
+pub fn stiff_step_f64(
+    s: &mut stiff_actuator::Solver,
+    x0: &[f64; stiff_actuator::NX_MODEL],
+) -> Option<[f64; stiff_actuator::NU]> {
+    s.prepare();
+    s.set_x0(x0).ok()?;
+    let info = s.feedback();
+    let _ = s.solve_sqp();
+    (info.status == stiff_actuator::RtiStatus::Ok).then(|| s.u0())
+}
