@@ -225,10 +225,28 @@ fn a_fresh_project_generates_builds_and_runs_a_solver_from_the_packaged_crates()
             "-p",
             "mpc-codegen",
             "--allow-dirty",
+            "--no-verify",
         ],
     );
+    // Unpacked here, as a registry would unpack them. Not `cargo package`'s own verification:
+    // it builds the packed crates as registry crates of version 0.1.0, whose compiled
+    // artifacts cargo reuses across changes of their source.
     let version = mpc_codegen::vendor::RUNTIME_VERSION;
-    let packed = |name: &str| target_dir().join(format!("package/{name}-{version}"));
+    let unpacked = target_dir().join("unpacked");
+    let _ = std::fs::remove_dir_all(&unpacked);
+    std::fs::create_dir_all(&unpacked).unwrap();
+    for name in ["mpc-dsl", "mpc-runtime", "mpc-codegen"] {
+        let krate = target_dir().join(format!("package/{name}-{version}.crate"));
+        let out = Command::new("tar")
+            .arg("xzf")
+            .arg(&krate)
+            .arg("-C")
+            .arg(&unpacked)
+            .output()
+            .expect("tar runs");
+        assert!(out.status.success(), "{}: {}", krate.display(), text(&out));
+    }
+    let packed = |name: &str| unpacked.join(format!("{name}-{version}"));
     let dir = scratch("fresh");
     std::fs::create_dir_all(dir.join("src")).unwrap();
     std::fs::write(dir.join("pointmass.mpc"), MODEL).unwrap();
