@@ -179,7 +179,7 @@ impl<T: Real, const K: usize> Rows<T, K> {
     }
 
     /// The rows of an exact solution `v` on an active set, with the bounds' multipliers
-    /// `mu` (`lam_l - lam_u`): slacks from `v` (zero on the held bounds), multipliers
+    /// `mu` (`lam_l - lam_u`): slacks from `v` (zero on the held sides), multipliers
     /// `max(mu, 0)` on the held lower bounds and `max(-mu, 0)` on the held upper ones, zero on
     /// the others (a dual warm start floors them).
     pub fn hold(
@@ -194,24 +194,24 @@ impl<T: Real, const K: usize> Rows<T, K> {
             return;
         }
         self.dirty = true;
+        // A held side's slack is zero whatever `v`: a value off its bound shows in the
+        // inequality residual (a control held so is on it exactly).
         for i in 0..K {
             (self.tl[i], self.ll[i]) = if self.has_lo[i] {
-                let lam = if lower[i] {
-                    mu[i].max(T::ZERO)
+                if lower[i] {
+                    (T::ZERO, mu[i].max(T::ZERO))
                 } else {
-                    T::ZERO
-                };
-                ((v[i] - self.lo[i]).max(T::ZERO), lam)
+                    ((v[i] - self.lo[i]).max(T::ZERO), T::ZERO)
+                }
             } else {
                 (T::ONE, T::ZERO)
             };
             (self.tu[i], self.lu[i]) = if self.has_hi[i] {
-                let lam = if upper[i] {
-                    (-mu[i]).max(T::ZERO)
+                if upper[i] {
+                    (T::ZERO, (-mu[i]).max(T::ZERO))
                 } else {
-                    T::ZERO
-                };
-                ((self.hi[i] - v[i]).max(T::ZERO), lam)
+                    ((self.hi[i] - v[i]).max(T::ZERO), T::ZERO)
+                }
             } else {
                 (T::ONE, T::ZERO)
             };
@@ -1003,6 +1003,43 @@ impl<T: Real, const K: usize> Soft<T, K> {
                 if self.bd_u[i] {
                     self.mu[i] = self.mu[i].max(lam_floor);
                 }
+            }
+        }
+    }
+
+    /// The slacks of an exact solution on a warm active set, after [`Rows::hold`] set the
+    /// rows at the values `v`: a violated side (`over_l` / `over_u`) takes the violation as
+    /// its slack and multiplier zero; any other side slack zero and the multiplier
+    /// `max(l1 - lam, 0)`. A held side whose force passed `l1`, or a violated one whose
+    /// force is below it, shows in the slacks' stationarity (`residuals`).
+    pub fn hold(&mut self, rows: &Rows<T, K>, v: &SVector<T, K>, over_l: &[bool; K], over_u: &[bool; K]) {
+        if !self.any {
+            return;
+        }
+        for i in 0..K {
+            if self.on_l[i] {
+                self.sl[i] = if over_l[i] {
+                    (rows.lo[i] - v[i]).max(T::ZERO)
+                } else {
+                    T::ZERO
+                };
+                self.ml[i] = if self.bd_l[i] {
+                    (self.z1[i] - rows.ll[i]).max(T::ZERO)
+                } else {
+                    T::ZERO
+                };
+            }
+            if self.on_u[i] {
+                self.su[i] = if over_u[i] {
+                    (v[i] - rows.hi[i]).max(T::ZERO)
+                } else {
+                    T::ZERO
+                };
+                self.mu[i] = if self.bd_u[i] {
+                    (self.z1[i] - rows.lu[i]).max(T::ZERO)
+                } else {
+                    T::ZERO
+                };
             }
         }
     }
