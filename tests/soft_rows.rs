@@ -1,6 +1,6 @@
 //! The bicycle's closed loop (`models/bicycle.mpc`, its soft obstacle row) on the warm active
 //! set: the same closed loop as with the interior point at tight tolerances, with the
-//! interior point in few steps; also with the row made hard at run time.
+//! interior point in few steps; also with the row made hard, and switched off, at run time.
 
 #[path = "../examples/soft_rows/bicycle_loop.rs"]
 mod bicycle_loop;
@@ -40,7 +40,10 @@ fn same_closed_loop(row: Row, ip_steps: usize) {
         ip.iterations.iter().filter(|&&i| i > 0).count()
     );
     assert!(gap <= 1e-7, "{row:?}: {gap:e}");
-    assert!(with_ip <= ip_steps, "{row:?}: interior point in {with_ip} steps");
+    assert!(
+        with_ip <= ip_steps,
+        "{row:?}: interior point in {with_ip} steps"
+    );
     // Not a loop that never meets the obstacle: the row was active (the plant passes
     // within 0.05 of the circle) on its way.
     let ([ox, oy], r) = ([6.0, -0.3], 1.0);
@@ -60,4 +63,9 @@ fn the_soft_obstacle_row_on_the_warm_active_set_gives_the_interior_points_closed
 #[test]
 fn the_obstacle_row_made_hard_on_the_warm_active_set_gives_the_same_closed_loop() {
     same_closed_loop(Row::Hard, 6);
+}
+
+#[test]
+fn the_bicycle_without_the_obstacle_row_gives_the_same_closed_loop() {
+    same_closed_loop(Row::Off, 0);
 }

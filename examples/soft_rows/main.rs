@@ -37,7 +37,9 @@ fn main() {
     let only = std::env::args().nth(1);
     if let Some(name) = only {
         let Some(&(_, row, warm)) = CASES.iter().find(|c| c.0 == name) else {
-            eprintln!("unknown case {name}: one of soft-warm, soft-ip, hard-warm, hard-ip, off-warm, off-ip");
+            eprintln!(
+                "unknown case {name}: one of soft-warm, soft-ip, hard-warm, hard-ip, off-warm, off-ip"
+            );
             std::process::exit(2);
         };
         let r = run(settings(warm), row);
@@ -52,7 +54,11 @@ fn main() {
         // Best of three runs per step (the machine is shared).
         let runs: Vec<Run> = (0..3).map(|_| run(settings(warm), row)).collect();
         let best: Vec<f64> = (0..STEPS)
-            .map(|k| runs.iter().map(|r| r.seconds[k]).fold(f64::INFINITY, f64::min))
+            .map(|k| {
+                runs.iter()
+                    .map(|r| r.seconds[k])
+                    .fold(f64::INFINITY, f64::min)
+            })
             .collect();
         let r = &runs[0];
         let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;

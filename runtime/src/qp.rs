@@ -1564,12 +1564,18 @@ impl<
             *last = t.q;
             add_diagonal(
                 last,
-                &self
-                    .rxn
-                    .scatter(&weights(&self.rxn, None, mode.weight(|a| &a.xn, |h| Some(&h.xn)))),
+                &self.rxn.scatter(&weights(
+                    &self.rxn,
+                    None,
+                    mode.weight(|a| &a.xn, |h| Some(&h.xn)),
+                )),
             );
             if NGN > 0 {
-                let sg = weights(&self.rgn, Some(&self.sgn), mode.weight(|a| &a.gn, |h| Some(&h.gn)));
+                let sg = weights(
+                    &self.rgn,
+                    Some(&self.sgn),
+                    mode.weight(|a| &a.gn, |h| Some(&h.gn)),
+                );
                 mul_sparse_add_into(last, &scaled_transpose(&sg, &t.c), &t.c);
             }
             symmetrize(last);
@@ -1595,7 +1601,11 @@ impl<
             // runs down its columns.
             let mut sbt = h.s.transpose();
             let cts = if NG > 0 {
-                let w = weights(&self.rg[k], Some(&self.sg[k]), mode.weight(|a| &a.g[k], |h| h.g.get(k)));
+                let w = weights(
+                    &self.rg[k],
+                    Some(&self.sg[k]),
+                    mode.weight(|a| &a.g[k], |h| h.g.get(k)),
+                );
                 mul_sparse_add_into(&mut rbar, &scaled_transpose(&w, &s.d), &s.d);
                 let cts = scaled_transpose(&w, &s.c);
                 mul_sparse_add_into(&mut sbt, &cts, &s.d);
@@ -1641,7 +1651,11 @@ impl<
                 *pk = h.q;
                 add_diagonal(
                     pk,
-                    &self.rx[k].scatter(&weights(&self.rx[k], None, mode.weight(|a| &a.x[k], |h| h.x.get(k)))),
+                    &self.rx[k].scatter(&weights(
+                        &self.rx[k],
+                        None,
+                        mode.weight(|a| &a.x[k], |h| h.x.get(k)),
+                    )),
                 );
                 if let Some(cts) = cts {
                     mul_sparse_add_into(pk, &cts, &s.c);

@@ -1012,7 +1012,13 @@ impl<T: Real, const K: usize> Soft<T, K> {
     /// its slack and multiplier zero; any other side slack zero and the multiplier
     /// `max(l1 - lam, 0)`. A held side whose force passed `l1`, or a violated one whose
     /// force is below it, shows in the slacks' stationarity (`residuals`).
-    pub fn hold(&mut self, rows: &Rows<T, K>, v: &SVector<T, K>, over_l: &[bool; K], over_u: &[bool; K]) {
+    pub fn hold(
+        &mut self,
+        rows: &Rows<T, K>,
+        v: &SVector<T, K>,
+        over_l: &[bool; K],
+        over_u: &[bool; K],
+    ) {
         if !self.any {
             return;
         }

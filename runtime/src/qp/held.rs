@@ -153,7 +153,8 @@ impl<
                 let now = held(&lower, &upper);
                 // Bounds added through the Schur complement only where no row is held (the
                 // rows' penalty iteration would have to run through it).
-                schur = !self.rows_on && self.hold_by_columns(qp, &factored, &before, &now, &mut cols);
+                schur =
+                    !self.rows_on && self.hold_by_columns(qp, &factored, &before, &now, &mut cols);
                 if !schur {
                     // The recursion runs backward: the stages after the last one whose held
                     // controls changed keep their factorization (the last one's, on this
@@ -570,7 +571,13 @@ impl<
             }
             if NG > 0 {
                 let v = mul(&s.c, &x) + mul(&s.d, &u);
-                set_rows(&mut self.rg[k], Some(&mut self.sg[k]), &rows.g[k], &v, &y.g[k]);
+                set_rows(
+                    &mut self.rg[k],
+                    Some(&mut self.sg[k]),
+                    &rows.g[k],
+                    &v,
+                    &y.g[k],
+                );
             }
             let mu = self.control_multipliers(qp, k);
             self.ru[k].hold(&u, &mu, &lower[k], &upper[k]);
@@ -991,8 +998,13 @@ impl<const NBX: usize, const NG: usize, const NGN: usize, const N: usize> Holds<
 /// Values per row of the warm active set (the held rows' multipliers `lam_l - lam_u`, or the
 /// penalty terms of a step).
 #[derive(Clone, Copy)]
-pub(super) struct RowVals<T: Real, const NBX: usize, const NG: usize, const NGN: usize, const N: usize>
-{
+pub(super) struct RowVals<
+    T: Real,
+    const NBX: usize,
+    const NG: usize,
+    const NGN: usize,
+    const N: usize,
+> {
     x: [Vect<T, NBX>; N],
     g: [Vect<T, NG>; N],
     xn: Vect<T, NBX>,
@@ -1133,9 +1145,8 @@ fn move_rows<T: Real, const K: usize>(
 ) -> bool {
     let mut moved = false;
     for (i, h) in holds.iter_mut().enumerate() {
-        let (on_l, on_u, z1) = soft.map_or((false, false, T::ZERO), |s| {
-            (s.on_l[i], s.on_u[i], s.z1[i])
-        });
+        let (on_l, on_u, z1) =
+            soft.map_or((false, false, T::ZERO), |s| (s.on_l[i], s.on_u[i], s.z1[i]));
         let (yi, vi) = (y[i], v[i]);
         let (ys, vs) = (tol * T::ONE.max(yi.abs()), tol * T::ONE.max(vi.abs()));
         let pinned = r.has_lo[i] && r.has_hi[i] && r.hi[i] <= r.lo[i];
@@ -1151,12 +1162,22 @@ fn move_rows<T: Real, const K: usize>(
             Hold::OverUpper if vi < r.hi[i] - vs => {
                 (if has_l1 { Hold::Upper } else { Hold::Free }, -z1)
             }
-            Hold::Free if r.has_lo[i] && vi < r.lo[i] - vs => {
-                (if on_l && !has_l1 { Hold::OverLower } else { Hold::Lower }, T::ZERO)
-            }
-            Hold::Free if r.has_hi[i] && vi > r.hi[i] + vs => {
-                (if on_u && !has_l1 { Hold::OverUpper } else { Hold::Upper }, T::ZERO)
-            }
+            Hold::Free if r.has_lo[i] && vi < r.lo[i] - vs => (
+                if on_l && !has_l1 {
+                    Hold::OverLower
+                } else {
+                    Hold::Lower
+                },
+                T::ZERO,
+            ),
+            Hold::Free if r.has_hi[i] && vi > r.hi[i] + vs => (
+                if on_u && !has_l1 {
+                    Hold::OverUpper
+                } else {
+                    Hold::Upper
+                },
+                T::ZERO,
+            ),
             same => (same, yi),
         };
         if new != *h {
@@ -1170,7 +1191,11 @@ fn move_rows<T: Real, const K: usize>(
 
 /// `holds` less the sides the rows no longer have: a violated side that is no longer soft
 /// is held, a held side that is gone is free.
-fn present<T: Real, const K: usize>(r: &Rows<T, K>, soft: Option<&Soft<T, K>>, holds: &mut [Hold; K]) {
+fn present<T: Real, const K: usize>(
+    r: &Rows<T, K>,
+    soft: Option<&Soft<T, K>>,
+    holds: &mut [Hold; K],
+) {
     for (i, h) in holds.iter_mut().enumerate() {
         let (on_l, on_u) = soft.map_or((false, false), |s| (s.on_l[i], s.on_u[i]));
         *h = match *h {
