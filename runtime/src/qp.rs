@@ -334,7 +334,8 @@ pub struct QpSettings<T> {
     /// rows are not polished, nor are QPs solved by the Riccati recursion in a solver with
     /// condensing storage (`NC = N`). Default: [`Real::DEFAULT_POLISH`].
     pub polish: bool,
-    /// Start from the last solve's active set (which control bounds held).
+    /// Start from the last solve's active set (which control bounds, and with the Riccati
+    /// recursion which rows, held).
     /// [`QpSolver::prepare`] factorizes the QP with those entries held on their bounds,
     /// which does not depend on `x0`: the condensed Hessian, or the Riccati recursion with
     /// the held controls eliminated and no barrier weights. [`QpSolver::solve_prepared`]
@@ -349,8 +350,9 @@ pub struct QpSettings<T> {
     /// [`QpInfo::iterations`] is then 0 and [`QpInfo::active_set_solves`] counts the
     /// solves. A solver's first QP (none solved since it was built) starts from the empty
     /// set: the unconstrained solution, then the active-set iterations. With the Riccati
-    /// recursion the set is taken only from solutions with no active row other than a
-    /// control bound, and QPs with soft rows are left to the interior point. Default: off
+    /// recursion the set also holds state bounds and general rows, hard and soft: each
+    /// free, held at a bound, or (soft) violated, with its penalty in the factorization
+    /// (`held.rs`). Default: off
     /// ([`RtiSettings::DEFAULT`](crate::RtiSettings) turns it on).
     pub warm_active_set: bool,
 }

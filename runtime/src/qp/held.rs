@@ -3,47 +3,75 @@
 //! its own, in `condense.rs`).
 //!
 //! A real-time iteration's QPs change little from one control step to the next, and so do
-//! the control bounds that hold in their solutions. Holding those controls on their bounds
-//! (and no other row), the QP is an equality-constrained linear-quadratic problem: the
-//! Riccati recursion with no barrier weight, the held controls' rows and columns of
-//! `R~ = R + B'PB` replaced by the identity and their rows of `S~ = S + B'PA` by zeros, so
-//! that `P` is the recursion's over the free controls alone. None of it depends on `x0`:
-//! [`QpSolver::prepare`] factorizes it. The solve is then `1 + settings.refine` Newton
-//! steps from zero with the held controls on their bounds (a backward and a forward vector
-//! pass each; the held controls' steps are zero), which give the active-set QP's solution
-//! and its dynamics multipliers. The bounds' multipliers follow from the controls'
-//! stationarity, `mu = R u + S x + gu + B'pi` (`lam_l - lam_u`).
+//! the bounds and rows that hold in their solutions. The set holds control bounds, and rows
+//! ([`Hold`]: state bounds by slot and general rows, at the stages and the terminal stage):
+//! each free (force zero), held at a bound (the row equals it; a soft row's slack is zero
+//! and its force between 0 and `l1`) or, a soft row, violated (slack `s > 0`, force
+//! `l1 + l2 s`: a linear and a quadratic term of the row). On that set the QP is an
+//! equality-constrained linear-quadratic problem plus the violated rows' penalties:
 //!
-//! The result is the QP's solution if the rows, set from it (held bounds at zero slack
-//! with the multipliers `max(mu, 0)` on a lower bound and `max(-mu, 0)` on an upper one,
-//! every other row free with its slack from the values and multiplier zero), meet the
-//! interior point's own stopping test: its stationarity, dynamics and inequality residuals
-//! within the tolerances (a held bound with a multiplier of the wrong sign shows in the
-//! stationarity residual, a free row past its bound in the inequality residual;
-//! complementarity is zero). One more Newton step is taken where the first misses (rounding
-//! at tight tolerances); if that misses too, the interior point solves the QP from the
-//! start, warm-started from the rows as set.
+//! - Held controls drop out of the Riccati recursion (their rows and columns of
+//!   `R~ = R + B'PB` replaced by the identity, their rows of `S~ = S + B'PA` by zeros).
+//! - A violated soft row adds `l2 a a'` to the Hessian along it (`a` its row `[C D]`, `e_j`
+//!   for a state bound), as a barrier weight would; its force is exact in one step.
+//! - A held row gets the penalty weight `w = 1 / sqrt(eps)` (the polish's), which makes the
+//!   factorization that of the KKT system regularized by `-1/w` in the row's multiplier `y`;
+//!   each Newton step adds the gradient `a (w (c - b) - y)` and updates `y -= w (c - b +
+//!   a'dz)` (iterative refinement of the unregularized system: the error of `y` contracts by
+//!   about `1 / (1 + w s)` a step, `s` the smallest eigenvalue of the held rows' Schur
+//!   complement; 1e-7 and less in f64 on the bicycle).
 //!
-//! A move that only adds bounds is taken without refactorizing when that is cheaper (the
-//! Schur complement of the added bounds): the solution on the factorized set `F` plus
-//! forces `d_l` (gradients) on the added controls `l` is the solution on the new set when
-//! the forces hold those controls on their bounds. With `M_jl` the response of control `j`
-//! to a unit gradient on control `l` (one backward pass from `l`'s stage and one forward
-//! pass to the last stage with such a bound, on the factorization of `F`), the forces solve
-//! `M d = b - u` (`-M` is positive definite where the new set's reduced Hessian is; its
-//! Cholesky factor is checked), and their response is one more pair of passes. From the
-//! last set's solution that is the whole solve; a further Newton step (the retry, or
-//! iterative refinement) is a step on `F`, then the same correction. Up to 8 bounds are
-//! held so in one solve, while their passes cost less than refactorizing the stages up to
-//! the last one that changed (one stage's factorization counted as 10 stages of passes;
-//! about 14 in callgrind on QR-bench: `runtime/examples/cold_qp.rs`). A move may also free
-//! bounds held so: their forces, `-mu` from the controls' stationarity, are cancelled by
-//! one more pair of passes before the correction. A move that frees a bound the
-//! factorization holds refactorizes.
+//! None of it depends on `x0`: [`QpSolver::prepare`] factorizes it (the recursion with no
+//! barrier weight otherwise). The solve is then `1 + settings.refine` Newton steps from zero
+//! with the held controls on their bounds, one more where rows are held (a backward and a
+//! forward vector pass each; the held controls' steps are zero), which give the active-set
+//! QP's solution, its dynamics multipliers and the held rows' multipliers. The bounds'
+//! multipliers follow from the controls' stationarity, `mu = R u + S x + gu + B'pi - D'y`.
 //!
-//! The set is taken from each interior-point solution (the control bounds whose multiplier
-//! exceeds their slack) only when no other row is active and the QP has no soft row;
-//! otherwise there is no warm set until such a solution comes.
+//! The result is the QP's solution if the rows, set from it, meet the interior point's own
+//! stopping test: its stationarity, dynamics and inequality residuals within the
+//! tolerances. Held sides are set at zero slack with the multipliers `max(mu, 0)` on a lower
+//! side and `max(-mu, 0)` on an upper one; a violated soft side with its violation as slack
+//! and the force `l1 + l2 s` as multiplier; every other side free with its slack from the
+//! values and multiplier zero; a soft side's slack multiplier is `max(l1 - lam, 0)`. So a
+//! held side with a multiplier of the wrong sign (or, soft, above `l1`), or a violated one
+//! whose force is below `l1`, shows in the stationarity residual, a held side off its bound
+//! or a free one past it in the inequality residual; complementarity is zero. Where only
+//! control bounds are held and no row is soft the residuals come from one pass that leaves
+//! out the rows' zero terms (`hold_rows`); otherwise from the interior point's `residuals`
+//! and `stationarity`.
+//! One more Newton step (with held rows, up to [`ROW_RETRIES`] more pairs) is taken where
+//! the first misses by less than 1e4 times the tolerances (rounding, or the penalty's
+//! contraction); otherwise the set moves (up to [`ITERATIONS`] times, one factorization
+//! each): a control or row held with the wrong sign is freed, a free one past a bound is
+//! held on it, a held soft row whose force passed `l1` becomes violated, a violated one
+//! whose slack would be negative is held (with `l1 = 0`: free, and a free one past its bound
+//! violated). If that ends nowhere, the interior point solves the QP from the start,
+//! warm-started from the rows as set.
+//!
+//! A move that only adds control bounds, with no row held or soft, is taken without
+//! refactorizing when that is cheaper (the Schur complement of the added bounds): the
+//! solution on the factorized set `F` plus forces `d_l` (gradients) on the added controls
+//! `l` is the solution on the new set when the forces hold those controls on their bounds.
+//! With `M_jl` the response of control `j` to a unit gradient on control `l` (one backward
+//! pass from `l`'s stage and one forward pass to the last stage with such a bound, on the
+//! factorization of `F`), the forces solve `M d = b - u` (`-M` is positive definite where
+//! the new set's reduced Hessian is; its Cholesky factor is checked), and their response is
+//! one more pair of passes. From the last set's solution that is the whole solve; a further
+//! Newton step (the retry, or iterative refinement) is a step on `F`, then the same
+//! correction. Up to 8 bounds are held so in one solve, while their passes cost less than
+//! refactorizing the stages up to the last one that changed (one stage's factorization
+//! counted as 10 stages of passes; about 14 in callgrind on QR-bench:
+//! `runtime/examples/cold_qp.rs`). A move may also free bounds held so: their forces, `-mu`
+//! from the controls' stationarity, are cancelled by one more pair of passes before the
+//! correction. A move that frees a bound the factorization holds refactorizes, and so does
+//! a move of a row (the whole recursion; a move of control bounds alone refactorizes the
+//! stages up to the last one that changed).
+//!
+//! The set is taken from each interior-point solution: the control bounds, state bounds and
+//! general rows whose multiplier exceeds their slack, a soft side among them violated where
+//! its slack exceeds the slack's multiplier (or it has no `l1`). [`QpSolver::shift_active_set`]
+//! moves it, rows included, with the trajectory.
 
 use super::polish::{Side, initial_sides};
 use super::{Newton, OcpQp, QpInfo, QpSolution, QpSolver, QpStatus, Vect};
