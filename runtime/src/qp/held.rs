@@ -630,6 +630,9 @@ impl<
     /// each row's term (a held row's penalty `w (c - b) - y`, a violated soft side's force
     /// `l1 + l2 s` with its sign) in the factorization that weighs them so, and the held
     /// rows' multipliers updated, `y -= w (c - b + a'dz)`.
+    // Over 80 lines: `held_step`'s passes with each of the four row sets' terms (stage and
+    // terminal state bounds and general rows) added in place, which splitting would only
+    // spread over helpers taking the whole state.
     fn held_step_rows<const NH: usize>(
         &mut self,
         qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>,
