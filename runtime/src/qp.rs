@@ -46,7 +46,7 @@ mod condense;
 mod held;
 mod polish;
 
-use held::{Hold, Holds, penalty};
+use held::{Hold, Holds};
 use polish::{ActiveSet, Side, Weight, weights};
 
 type Mat<T, const R: usize, const C: usize> = SMatrix<T, R, C>;
@@ -680,7 +680,7 @@ impl<
         match self {
             Newton::Interior => Weight::Barrier,
             Newton::Polish(a) => Weight::Active(sides(a), a.w),
-            Newton::Held(_, h) => holds(h).map_or(Weight::Zero, |h| Weight::Held(h, penalty())),
+            Newton::Held(_, h) => holds(h).map_or(Weight::Zero, Weight::Held),
         }
     }
 }

@@ -1057,22 +1057,21 @@ impl<T: Real, const NBX: usize, const NG: usize, const NGN: usize, const N: usiz
 /// the factorization is then the KKT system's regularized by `-1/w` in the rows'
 /// multipliers, and each step contracts the multipliers' error by about `1 / (1 + w s)`,
 /// `s` the smallest eigenvalue of the held rows' Schur complement.
-pub(super) fn penalty<T: Real>() -> T {
+fn penalty<T: Real>() -> T {
     T::ONE / T::EPSILON.sqrt()
 }
 
-/// The weights the warm active set's rows add to the Hessian along them: `w` on a held
-/// row, `l2` on a violated soft side, none on a free row.
+/// The weights the warm active set's rows add to the Hessian along them: [`penalty`] on a
+/// held row, `l2` on a violated soft side, none on a free row.
 pub(super) fn held_weights<T: Real, const K: usize>(
     holds: &[Hold; K],
     soft: Option<&Soft<T, K>>,
-    w: T,
 ) -> Vect<T, K> {
     let mut v = Vect::<T, K>::zeros();
     for (i, h) in holds.iter().enumerate() {
         v[i] = match h {
             Hold::Free => T::ZERO,
-            Hold::Lower | Hold::Upper => w,
+            Hold::Lower | Hold::Upper => penalty(),
             Hold::OverLower | Hold::OverUpper => soft.map_or(T::ZERO, |s| s.z2[i]),
         };
     }

@@ -203,9 +203,9 @@ pub(super) enum Weight<'a, T, const K: usize> {
     Barrier,
     /// The polish's: `w` on the active rows, none on the others.
     Active(&'a [Side; K], T),
-    /// The warm active set's rows ([`Hold`]): the penalty weight `w` on the held ones,
-    /// a violated soft side's `l2`, none on the others.
-    Held(&'a [Hold; K], T),
+    /// The warm active set's rows ([`Hold`]): the penalty weight on the held ones, a
+    /// violated soft side's `l2`, none on the others.
+    Held(&'a [Hold; K]),
     /// None.
     Zero,
 }
@@ -219,7 +219,7 @@ pub(super) fn weights<T: Real, const K: usize>(
     match weight {
         Weight::Barrier => rows.sigma(soft),
         Weight::Zero => Vect::zeros(),
-        Weight::Held(holds, w) => held_weights(holds, soft, w),
+        Weight::Held(holds) => held_weights(holds, soft),
         Weight::Active(sides, w) => {
             let mut v = Vect::<T, K>::zeros();
             for (vi, side) in v.iter_mut().zip(sides) {
