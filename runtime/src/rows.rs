@@ -179,7 +179,7 @@ impl<T: Real, const K: usize> Rows<T, K> {
     }
 
     /// The rows of an exact solution `v` on an active set, with the bounds' multipliers
-    /// `mu` (`lam_l - lam_u`): slacks from `v` (zero on the held sides), multipliers
+    /// `mu` (`lam_l - lam_u`): slacks from `v` (zero on the held bounds), multipliers
     /// `max(mu, 0)` on the held lower bounds and `max(-mu, 0)` on the held upper ones, zero on
     /// the others (a dual warm start floors them).
     pub fn hold(
@@ -194,24 +194,24 @@ impl<T: Real, const K: usize> Rows<T, K> {
             return;
         }
         self.dirty = true;
-        // A held side's slack is zero whatever `v`: a value off its bound shows in the
-        // inequality residual (a control held so is on it exactly).
         for i in 0..K {
             (self.tl[i], self.ll[i]) = if self.has_lo[i] {
-                if lower[i] {
-                    (T::ZERO, mu[i].max(T::ZERO))
+                let lam = if lower[i] {
+                    mu[i].max(T::ZERO)
                 } else {
-                    ((v[i] - self.lo[i]).max(T::ZERO), T::ZERO)
-                }
+                    T::ZERO
+                };
+                ((v[i] - self.lo[i]).max(T::ZERO), lam)
             } else {
                 (T::ONE, T::ZERO)
             };
             (self.tu[i], self.lu[i]) = if self.has_hi[i] {
-                if upper[i] {
-                    (T::ZERO, (-mu[i]).max(T::ZERO))
+                let lam = if upper[i] {
+                    (-mu[i]).max(T::ZERO)
                 } else {
-                    ((self.hi[i] - v[i]).max(T::ZERO), T::ZERO)
-                }
+                    T::ZERO
+                };
+                ((self.hi[i] - v[i]).max(T::ZERO), lam)
             } else {
                 (T::ONE, T::ZERO)
             };

@@ -113,7 +113,7 @@ impl<
     /// Whether the loaded QP has a soft row (its rows are then set and judged by the
     /// general residuals).
     fn any_soft(&self) -> bool {
-        self.sg.iter().any(|s| s.any) || self.sgn.any
+        (NG > 0 && self.sg.iter().any(|s| s.any)) || (NGN > 0 && self.sgn.any)
     }
 
     /// The preparation of the warm active set of the Riccati recursion: the stored set, less
@@ -731,6 +731,9 @@ impl<
         rows: &mut Holds<NBX, NG, NGN, N>,
         y: &mut RowVals<T, NBX, NG, NGN, N>,
     ) -> bool {
+        if Holds::<NBX, NG, NGN, N>::NONE {
+            return false;
+        }
         let tol = self.settings.tol_ineq.max(self.settings.tol_stat);
         let mut moved = false;
         for k in 0..N {
@@ -761,6 +764,9 @@ impl<
     /// The stored rows less the sides the loaded QP no longer has (a violated side that is
     /// no longer soft is held), stored again and returned.
     fn present_rows(&mut self) -> Holds<NBX, NG, NGN, N> {
+        if Holds::<NBX, NG, NGN, N>::NONE {
+            return Holds::FREE;
+        }
         let mut rows = self.act_rows;
         for k in 0..N {
             present(&self.rx[k], None, &mut rows.x[k]);
@@ -996,6 +1002,10 @@ impl<const NBX: usize, const NG: usize, const NGN: usize, const N: usize> Holds<
         gn: [Hold::Free; NGN],
     };
 
+    /// The solver has no row (no state-bound slot, no general row): every method is then
+    /// trivial, and skipped (QR-bench's solvers).
+    const NONE: bool = NBX == 0 && NG == 0 && NGN == 0;
+
     /// Every hold, stage by stage.
     fn all(&self) -> impl Iterator<Item = &Hold> {
         self.x
@@ -1008,12 +1018,12 @@ impl<const NBX: usize, const NG: usize, const NGN: usize, const N: usize> Holds<
 
     /// Some row is not free.
     pub fn any(&self) -> bool {
-        self.all().any(|h| *h != Hold::Free)
+        !Self::NONE && self.all().any(|h| *h != Hold::Free)
     }
 
     /// Some row is held at a bound (its multiplier comes from the penalty iteration).
     fn any_held(&self) -> bool {
-        self.all().any(|h| matches!(h, Hold::Lower | Hold::Upper))
+        !Self::NONE && self.all().any(|h| matches!(h, Hold::Lower | Hold::Upper))
     }
 
     /// Moves the rows one stage forward (the last stage's repeated), as
@@ -1157,6 +1167,17 @@ fn set_rows<T: Real, const K: usize>(
         }
     }
     r.hold(v, &mu, &lower, &upper);
+    // A held or violated side's slack is zero whatever `v` (`Rows::hold` takes it from `v`,
+    // which a held control meets exactly): a row off its bound shows in the inequality
+    // residual.
+    for i in 0..K {
+        if lower[i] && r.has_lo[i] {
+            r.tl[i] = T::ZERO;
+        }
+        if upper[i] && r.has_hi[i] {
+            r.tu[i] = T::ZERO;
+        }
+    }
     if let Some(sf) = soft {
         sf.hold(r, v, &over_l, &over_u);
     }
