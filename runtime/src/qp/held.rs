@@ -19,7 +19,7 @@
 //!   each Newton step adds the gradient `a (w (c - b) - y)` and updates `y -= w (c - b +
 //!   a'dz)` (iterative refinement of the unregularized system: the error of `y` contracts by
 //!   about `1 / (1 + w s)` a step, `s` the smallest eigenvalue of the held rows' Schur
-//!   complement; 1e-7 and less in f64 on the bicycle).
+//!   complement).
 //!
 //! None of it depends on `x0`: [`QpSolver::prepare`] factorizes it (the recursion with no
 //! barrier weight otherwise). The solve is then `1 + settings.refine` Newton steps from zero
