@@ -46,6 +46,7 @@ mod condense;
 mod held;
 mod polish;
 
+use held::{Hold, Holds};
 use polish::{ActiveSet, Side, Weight, weights};
 
 type Mat<T, const R: usize, const C: usize> = SMatrix<T, R, C>;
@@ -333,7 +334,8 @@ pub struct QpSettings<T> {
     /// rows are not polished, nor are QPs solved by the Riccati recursion in a solver with
     /// condensing storage (`NC = N`). Default: [`Real::DEFAULT_POLISH`].
     pub polish: bool,
-    /// Start from the last solve's active set (which control bounds held).
+    /// Start from the last solve's active set (which control bounds, and with the Riccati
+    /// recursion which rows, held).
     /// [`QpSolver::prepare`] factorizes the QP with those entries held on their bounds,
     /// which does not depend on `x0`: the condensed Hessian, or the Riccati recursion with
     /// the held controls eliminated and no barrier weights. [`QpSolver::solve_prepared`]
@@ -348,8 +350,9 @@ pub struct QpSettings<T> {
     /// [`QpInfo::iterations`] is then 0 and [`QpInfo::active_set_solves`] counts the
     /// solves. A solver's first QP (none solved since it was built) starts from the empty
     /// set: the unconstrained solution, then the active-set iterations. With the Riccati
-    /// recursion the set is taken only from solutions with no active row other than a
-    /// control bound, and QPs with soft rows are left to the interior point. Default: off
+    /// recursion the set also holds state bounds and general rows, hard and soft: each
+    /// free, held at a bound, or (soft) violated, with its penalty in the factorization
+    /// (`held.rs`). Default: off
     /// ([`RtiSettings::DEFAULT`](crate::RtiSettings) turns it on).
     pub warm_active_set: bool,
 }
@@ -593,6 +596,12 @@ pub struct QpSolver<
     act_lo: [[bool; NU]; N],
     act_hi: [[bool; NU]; N],
     act_valid: bool,
+    /// The rows held in the last solution, with the control bounds above (Riccati
+    /// recursion only).
+    act_rows: Holds<NBX, NG, NGN, N>,
+    /// The warm active set's solve holds rows or has soft ones: its rows are set and
+    /// judged by the interior point's general residuals (`held.rs`).
+    rows_on: bool,
     /// A solve has been attempted since the solver was built (before it, a warm active set
     /// starts from the empty set).
     solved_before: bool,
@@ -645,8 +654,10 @@ enum Newton<
     Interior,
     /// The polish's: the rows of its active set with its penalty weight, the others none.
     Polish(&'a ActiveSet<T, NBX, NU, NG, NGN, N>),
-    /// The warm active set's: no row weighted, and the held controls (`true`) eliminated.
-    Held(&'a [[bool; NU]; N]),
+    /// The warm active set's: the held controls (`true`) eliminated, and the rows as
+    /// [`Holds`] says (held ones with the penalty weight, violated soft ones with their
+    /// `l2`, the others none).
+    Held(&'a [[bool; NU]; N], &'a Holds<NBX, NG, NGN, N>),
 }
 
 impl<
@@ -659,15 +670,17 @@ impl<
     const N: usize,
 > Newton<'a, T, NBX, NU, NG, NGN, N>
 {
-    /// The weights of the row set that `sides` picks from the polish's active set.
+    /// The weights of the row set that `sides` picks from the polish's active set, and
+    /// `holds` from the warm active set's rows (`None`: the controls, eliminated instead).
     fn weight<const K: usize>(
         self,
         sides: impl FnOnce(&'a ActiveSet<T, NBX, NU, NG, NGN, N>) -> &'a [Side; K],
+        holds: impl FnOnce(&'a Holds<NBX, NG, NGN, N>) -> Option<&'a [Hold; K]>,
     ) -> Weight<'a, T, K> {
         match self {
             Newton::Interior => Weight::Barrier,
             Newton::Polish(a) => Weight::Active(sides(a), a.w),
-            Newton::Held(_) => Weight::Zero,
+            Newton::Held(_, h) => holds(h).map_or(Weight::Zero, Weight::Held),
         }
     }
 }
@@ -789,6 +802,8 @@ impl<
         act_lo: [[false; NU]; N],
         act_hi: [[false; NU]; N],
         act_valid: false,
+        act_rows: Holds::FREE,
+        rows_on: false,
         solved_before: false,
         guessed: false,
         on_active_set: false,
@@ -1551,12 +1566,18 @@ impl<
             *last = t.q;
             add_diagonal(
                 last,
-                &self
-                    .rxn
-                    .scatter(&weights(&self.rxn, None, mode.weight(|a| &a.xn))),
+                &self.rxn.scatter(&weights(
+                    &self.rxn,
+                    None,
+                    mode.weight(|a| &a.xn, |h| Some(&h.xn)),
+                )),
             );
             if NGN > 0 {
-                let sg = weights(&self.rgn, Some(&self.sgn), mode.weight(|a| &a.gn));
+                let sg = weights(
+                    &self.rgn,
+                    Some(&self.sgn),
+                    mode.weight(|a| &a.gn, |h| Some(&h.gn)),
+                );
                 mul_sparse_add_into(last, &scaled_transpose(&sg, &t.c), &t.c);
             }
             symmetrize(last);
@@ -1575,14 +1596,18 @@ impl<
             let mut rbar = h.r;
             add_diagonal(
                 &mut rbar,
-                &weights(&self.ru[k], None, mode.weight(|a| &a.u[k])),
+                &weights(&self.ru[k], None, mode.weight(|a| &a.u[k], |_| None)),
             );
             mul_sparse_add_into(&mut rbar, &pb.transpose(), &s.b);
             // S~' = S' + C' Sigma_g D + A'PB, transposed, so that every product with it
             // runs down its columns.
             let mut sbt = h.s.transpose();
             let cts = if NG > 0 {
-                let w = weights(&self.rg[k], Some(&self.sg[k]), mode.weight(|a| &a.g[k]));
+                let w = weights(
+                    &self.rg[k],
+                    Some(&self.sg[k]),
+                    mode.weight(|a| &a.g[k], |h| h.g.get(k)),
+                );
                 mul_sparse_add_into(&mut rbar, &scaled_transpose(&w, &s.d), &s.d);
                 let cts = scaled_transpose(&w, &s.c);
                 mul_sparse_add_into(&mut sbt, &cts, &s.d);
@@ -1601,7 +1626,7 @@ impl<
             };
             // Held controls drop out: their rows and columns of R~ become the identity and
             // their rows of S~ zero, so P_k is the recursion's over the free controls.
-            if let Newton::Held(held) = mode
+            if let Newton::Held(held, _) = mode
                 && let Some(held) = held.get(k)
             {
                 for (i, _) in held.iter().enumerate().filter(|(_, h)| **h) {
@@ -1628,7 +1653,11 @@ impl<
                 *pk = h.q;
                 add_diagonal(
                     pk,
-                    &self.rx[k].scatter(&weights(&self.rx[k], None, mode.weight(|a| &a.x[k]))),
+                    &self.rx[k].scatter(&weights(
+                        &self.rx[k],
+                        None,
+                        mode.weight(|a| &a.x[k], |h| h.x.get(k)),
+                    )),
                 );
                 if let Some(cts) = cts {
                     mul_sparse_add_into(pk, &cts, &s.c);

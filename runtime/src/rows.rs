@@ -1007,6 +1007,49 @@ impl<T: Real, const K: usize> Soft<T, K> {
         }
     }
 
+    /// The slacks of an exact solution on a warm active set, after [`Rows::hold`] set the
+    /// rows at the values `v`: a violated side (`over_l` / `over_u`) takes the violation as
+    /// its slack and multiplier zero; any other side slack zero and the multiplier
+    /// `max(l1 - lam, 0)`. A held side whose force passed `l1`, or a violated one whose
+    /// force is below it, shows in the slacks' stationarity (`residuals`).
+    pub fn hold(
+        &mut self,
+        rows: &Rows<T, K>,
+        v: &SVector<T, K>,
+        over_l: &[bool; K],
+        over_u: &[bool; K],
+    ) {
+        if !self.any {
+            return;
+        }
+        for i in 0..K {
+            if self.on_l[i] {
+                self.sl[i] = if over_l[i] {
+                    (rows.lo[i] - v[i]).max(T::ZERO)
+                } else {
+                    T::ZERO
+                };
+                self.ml[i] = if self.bd_l[i] {
+                    (self.z1[i] - rows.ll[i]).max(T::ZERO)
+                } else {
+                    T::ZERO
+                };
+            }
+            if self.on_u[i] {
+                self.su[i] = if over_u[i] {
+                    (v[i] - rows.hi[i]).max(T::ZERO)
+                } else {
+                    T::ZERO
+                };
+                self.mu[i] = if self.bd_u[i] {
+                    (self.z1[i] - rows.lu[i]).max(T::ZERO)
+                } else {
+                    T::ZERO
+                };
+            }
+        }
+    }
+
     /// Stationarity in the slacks, `z1 + z2 s - lam - m`, with the rows' multipliers; returns
     /// its largest magnitude and the largest of its terms.
     #[inline]

@@ -1470,9 +1470,7 @@ fn the_warm_active_set_solves_related_qps_exactly() {
 /// The same with the Riccati recursion: control-bounded QPs (QR-bench's size at N = 20,
 /// and smaller ones), where small changes are solved on the last active set in most cases,
 /// larger ones after active-set moves, and large jumps fall back to the interior point; and
-/// QPs with state bounds and general
-/// rows, where the warm set is taken only after a solution with control bounds alone
-/// active. Every solve ends on clarabel's solution and on the polished interior point's.
+/// QPs with state bounds and general rows, whose active rows the warm set holds too. Every solve ends on clarabel's solution and on the polished interior point's.
 #[test]
 fn the_warm_active_set_solves_related_qps_exactly_with_the_riccati_recursion() {
     let r = QpMethod::Riccati;
@@ -1512,12 +1510,118 @@ fn the_warm_active_set_solves_related_qps_exactly_with_the_riccati_recursion() {
         small.first_exact > 0 && jumps.first_interior > 0,
         "{small:?} {jumps:?}"
     );
-    // With state bounds and general rows, some solutions have only control bounds active
-    // (the warm set is taken after them) and some have others (none is).
+    // With state bounds and general rows active, the warm set holds them too: the
+    // interior point ran in few solves (a QP found infeasible leaves no warm set).
     assert!(
-        general.cold > 0 && general.warm() > 0,
+        general.warm() > 0
+            && 5 * general.interior <= general.warm()
+            && general.cold <= general.infeasible,
         "general: {general:?}"
     );
+}
+
+/// The warm active set of the Riccati recursion with soft rows (L1 only, L2 only, both; at
+/// the stages and the terminal stage), hard general rows and state bounds ([`random_soft_qp`],
+/// and [`widened_qp`] for hard rows): sequences with small moves are solved on the last
+/// set, its rows held or violated as they were, in most steps (no interior-point iteration);
+/// larger moves need active-set moves or the interior point. Every solve ends on clarabel's
+/// solution (slacks as variables) and on the interior point's at tight tolerances.
+#[test]
+fn the_warm_active_set_holds_soft_rows_and_state_bounds() {
+    let r = QpMethod::Riccati;
+    let small = warm_active_set_sequence::<4, 2, 2, 1, 10>(0..60, 0.01, r, random_soft_qp);
+    let large = warm_active_set_sequence::<4, 2, 2, 1, 10>(0..60, 0.5, r, random_soft_qp);
+    let wide = warm_active_set_sequence::<6, 3, 3, 2, 20>(0..30, 0.02, r, random_soft_qp);
+    let hard = warm_active_set_sequence::<4, 2, 2, 1, 10>(0..60, 0.01, r, widened_qp);
+    eprintln!(
+        "soft, small steps: {small:?}\nsoft, large steps: {large:?}\nsoft, 6x3, N = 20: \
+         {wide:?}\nhard rows, small steps: {hard:?}"
+    );
+    for (name, c) in [
+        ("small", &small),
+        ("large", &large),
+        ("wide", &wide),
+        ("hard", &hard),
+    ] {
+        assert!(c.judged >= 100, "{name}: {} judged", c.judged);
+        assert!(c.worst <= 1e-7, "{name}: {:e} from clarabel", c.worst);
+    }
+    // Small moves: the held path (no interior-point iteration) in most steps.
+    for (name, c) in [("small", &small), ("wide", &wide), ("hard", &hard)] {
+        assert!(
+            10 * (c.held + c.iterated) >= 9 * c.warm(),
+            "{name}: held in {} and after moves in {} of {}",
+            c.held,
+            c.iterated,
+            c.warm()
+        );
+        assert!(2 * c.held >= c.warm(), "{name}: {c:?}");
+        assert_eq!(c.cold, 0, "{name}: no warm set");
+    }
+    // Large moves: a QP found infeasible leaves no warm set for the next.
+    assert!(large.cold <= large.infeasible, "large steps: {large:?}");
+    assert!(large.iterated > 0, "large steps: {large:?}");
+}
+
+/// `min u^2 - 6 u` (unconstrained minimizer 3) with the soft row `u <= 1`: holding `u` at 1
+/// takes the force 4, so with `l1 > 4` the row is held (`u = 1`, slack 0), with `l1 < 4` it is
+/// violated, `u = (6 - l1 + l2) / (2 + l2)`. On one solver with the warm active set, through
+/// penalties that move the row between held, violated and back (L1 only, L2 only, both):
+/// every solve is the closed form (to the regularization's rounding), and a second solve of the same QP takes the held path
+/// (no interior-point iteration, one active-set solve).
+fn warm_scalar_soft<T: mpc_runtime::Real>(tol: f64) {
+    let cases = [
+        (6.0, 0.0),
+        (3.0, 0.0),
+        (0.0, 2.0),
+        (5.0, 0.0),
+        (2.0, 10.0),
+        (100.0, 1000.0),
+        (1.0, 0.5),
+    ];
+    let mut qp = OcpQp::<T, 1, 1, 1, 0, 1>::NEW;
+    qp.hessians[0].r[(0, 0)] = T::lit(2.0);
+    let s = &mut qp.stages[0];
+    s.gu[0] = T::lit(-6.0);
+    s.b[(0, 0)] = T::ONE;
+    s.d[(0, 0)] = T::ONE;
+    s.ug[0] = T::ONE;
+    qp.terminal.q[(0, 0)] = T::ZERO;
+    let mut solver = QpSolver::<T, 1, 1, 1, 0, 1>::NEW;
+    solver.settings.warm_active_set = true;
+    for (l1, l2) in cases {
+        qp.stages[0].soft_l1[0] = T::lit(l1);
+        qp.stages[0].soft_l2[0] = T::lit(l2);
+        let want = if l1 > 4.0 {
+            1.0
+        } else {
+            (6.0 - l1 + l2) / (2.0 + l2)
+        };
+        for again in [false, true] {
+            let info = solver.solve(&qp);
+            assert_eq!(info.status, QpStatus::Solved, "l1 {l1}, l2 {l2}: {info:?}");
+            let u = solver.solution().u[0][0].to_f64();
+            let su = solver.slacks(0).unwrap().1[0].to_f64();
+            assert!(
+                (u - want).abs() <= tol,
+                "l1 {l1}, l2 {l2}: u {u}, want {want}: {info:?}"
+            );
+            assert!(
+                (su - (want - 1.0)).abs() <= tol,
+                "l1 {l1}, l2 {l2}: slack {su}"
+            );
+            assert_eq!(info.iterations, 0, "l1 {l1}, l2 {l2}: {info:?}");
+            if again {
+                assert_eq!(info.active_set_solves, 1, "l1 {l1}, l2 {l2}: {info:?}");
+            }
+        }
+    }
+}
+
+#[test]
+fn a_soft_row_on_the_warm_active_set_is_held_or_violated_as_the_closed_form_says() {
+    warm_scalar_soft::<f64>(1e-9);
+    warm_scalar_soft::<f32>(1e-5);
 }
 
 /// Bounds removed between solves leave the warm active set without them (the entries they

@@ -430,13 +430,15 @@ impl<
         (lo, !lo && r.has_hi[i] && step > r.hi[i])
     }
 
-    /// Moves the stored active set one stage forward (the last stage's is repeated), as a
+    /// Moves the stored active set (control bounds, and the state bounds and general rows
+    /// of the Riccati recursion's) one stage forward (the last stage's is repeated), as a
     /// real-time iteration that shifts its trajectory does.
     pub fn shift_active_set(&mut self) {
         for k in 1..N {
             self.act_lo[k - 1] = self.act_lo[k];
             self.act_hi[k - 1] = self.act_hi[k];
         }
+        self.act_rows.shift();
     }
 
     /// The preparation of a warm active set: the stored set, less the bounds the QP no

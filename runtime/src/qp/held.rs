@@ -3,57 +3,91 @@
 //! its own, in `condense.rs`).
 //!
 //! A real-time iteration's QPs change little from one control step to the next, and so do
-//! the control bounds that hold in their solutions. Holding those controls on their bounds
-//! (and no other row), the QP is an equality-constrained linear-quadratic problem: the
-//! Riccati recursion with no barrier weight, the held controls' rows and columns of
-//! `R~ = R + B'PB` replaced by the identity and their rows of `S~ = S + B'PA` by zeros, so
-//! that `P` is the recursion's over the free controls alone. None of it depends on `x0`:
-//! [`QpSolver::prepare`] factorizes it. The solve is then `1 + settings.refine` Newton
-//! steps from zero with the held controls on their bounds (a backward and a forward vector
-//! pass each; the held controls' steps are zero), which give the active-set QP's solution
-//! and its dynamics multipliers. The bounds' multipliers follow from the controls'
-//! stationarity, `mu = R u + S x + gu + B'pi` (`lam_l - lam_u`).
+//! the bounds and rows that hold in their solutions. The set holds control bounds, and rows
+//! ([`Hold`]: state bounds by slot and general rows, at the stages and the terminal stage):
+//! each free (force zero), held at a bound (the row equals it; a soft row's slack is zero
+//! and its force between 0 and `l1`) or, a soft row, violated (slack `s > 0`, force
+//! `l1 + l2 s`: a linear and a quadratic term of the row). On that set the QP is an
+//! equality-constrained linear-quadratic problem plus the violated rows' penalties:
 //!
-//! The result is the QP's solution if the rows, set from it (held bounds at zero slack
-//! with the multipliers `max(mu, 0)` on a lower bound and `max(-mu, 0)` on an upper one,
-//! every other row free with its slack from the values and multiplier zero), meet the
-//! interior point's own stopping test: its stationarity, dynamics and inequality residuals
-//! within the tolerances (a held bound with a multiplier of the wrong sign shows in the
-//! stationarity residual, a free row past its bound in the inequality residual;
-//! complementarity is zero). One more Newton step is taken where the first misses (rounding
-//! at tight tolerances); if that misses too, the interior point solves the QP from the
-//! start, warm-started from the rows as set.
+//! - Held controls drop out of the Riccati recursion (their rows and columns of
+//!   `R~ = R + B'PB` replaced by the identity, their rows of `S~ = S + B'PA` by zeros).
+//! - A violated soft row adds `l2 a a'` to the Hessian along it (`a` its row `[C D]`, `e_j`
+//!   for a state bound), as a barrier weight would; its force is exact in one step.
+//! - A held row gets the penalty weight `w = 1 / sqrt(eps)` (the polish's), which makes the
+//!   factorization that of the KKT system regularized by `-1/w` in the row's multiplier `y`;
+//!   each Newton step adds the gradient `a (w (c - b) - y)` and updates `y -= w (c - b +
+//!   a'dz)` (iterative refinement of the unregularized system: the error of `y` contracts by
+//!   about `1 / (1 + w s)` a step, `s` the smallest eigenvalue of the held rows' Schur
+//!   complement).
 //!
-//! A move that only adds bounds is taken without refactorizing when that is cheaper (the
-//! Schur complement of the added bounds): the solution on the factorized set `F` plus
-//! forces `d_l` (gradients) on the added controls `l` is the solution on the new set when
-//! the forces hold those controls on their bounds. With `M_jl` the response of control `j`
-//! to a unit gradient on control `l` (one backward pass from `l`'s stage and one forward
-//! pass to the last stage with such a bound, on the factorization of `F`), the forces solve
-//! `M d = b - u` (`-M` is positive definite where the new set's reduced Hessian is; its
-//! Cholesky factor is checked), and their response is one more pair of passes. From the
-//! last set's solution that is the whole solve; a further Newton step (the retry, or
-//! iterative refinement) is a step on `F`, then the same correction. Up to 8 bounds are
-//! held so in one solve, while their passes cost less than refactorizing the stages up to
-//! the last one that changed (one stage's factorization counted as 10 stages of passes;
-//! about 14 in callgrind on QR-bench: `runtime/examples/cold_qp.rs`). A move may also free
-//! bounds held so: their forces, `-mu` from the controls' stationarity, are cancelled by
-//! one more pair of passes before the correction. A move that frees a bound the
-//! factorization holds refactorizes.
+//! None of it depends on `x0`: [`QpSolver::prepare`] factorizes it (the recursion with no
+//! barrier weight otherwise). The solve is then `1 + settings.refine` Newton steps from zero
+//! with the held controls on their bounds, one more where rows are held (a backward and a
+//! forward vector pass each; the held controls' steps are zero), which give the active-set
+//! QP's solution, its dynamics multipliers and the held rows' multipliers. The bounds'
+//! multipliers follow from the controls' stationarity, `mu = R u + S x + gu + B'pi - D'y`.
 //!
-//! The set is taken from each interior-point solution (the control bounds whose multiplier
-//! exceeds their slack) only when no other row is active and the QP has no soft row;
-//! otherwise there is no warm set until such a solution comes.
+//! The result is the QP's solution if the rows, set from it, meet the interior point's own
+//! stopping test: its stationarity, dynamics and inequality residuals within the
+//! tolerances. Held sides are set at zero slack with the multipliers `max(mu, 0)` on a lower
+//! side and `max(-mu, 0)` on an upper one; a violated soft side with its violation as slack
+//! and the force `l1 + l2 s` as multiplier; every other side free with its slack from the
+//! values and multiplier zero; a soft side's slack multiplier is `max(l1 - lam, 0)`. So a
+//! held side with a multiplier of the wrong sign (or, soft, above `l1`), or a violated one
+//! whose force is below `l1`, shows in the stationarity residual, a held side off its bound
+//! or a free one past it in the inequality residual; complementarity is zero. Where only
+//! control bounds are held and no row is soft the residuals come from one pass that leaves
+//! out the rows' zero terms (`hold_rows`); otherwise from the interior point's `residuals`
+//! and `stationarity`.
+//! One more Newton step (with held rows, up to [`ROW_RETRIES`] more pairs) is taken where
+//! the first misses by less than 1e4 times the tolerances (rounding, or the penalty's
+//! contraction); otherwise the set moves (up to [`ITERATIONS`] times, one factorization
+//! each): a control or row held with the wrong sign is freed, a free one past a bound is
+//! held on it, a held soft row whose force passed `l1` becomes violated, a violated one
+//! whose slack would be negative is held (with `l1 = 0`: free, and a free one past its bound
+//! violated). If that ends nowhere, the interior point solves the QP from the start,
+//! warm-started from the rows as set.
+//!
+//! A move that only adds control bounds, with no row held or soft, is taken without
+//! refactorizing when that is cheaper (the Schur complement of the added bounds): the
+//! solution on the factorized set `F` plus forces `d_l` (gradients) on the added controls
+//! `l` is the solution on the new set when the forces hold those controls on their bounds.
+//! With `M_jl` the response of control `j` to a unit gradient on control `l` (one backward
+//! pass from `l`'s stage and one forward pass to the last stage with such a bound, on the
+//! factorization of `F`), the forces solve `M d = b - u` (`-M` is positive definite where
+//! the new set's reduced Hessian is; its Cholesky factor is checked), and their response is
+//! one more pair of passes. From the last set's solution that is the whole solve; a further
+//! Newton step (the retry, or iterative refinement) is a step on `F`, then the same
+//! correction. Up to 8 bounds are held so in one solve, while their passes cost less than
+//! refactorizing the stages up to the last one that changed (one stage's factorization
+//! counted as 10 stages of passes; about 14 in callgrind on QR-bench:
+//! `runtime/examples/cold_qp.rs`). A move may also free bounds held so: their forces, `-mu`
+//! from the controls' stationarity, are cancelled by one more pair of passes before the
+//! correction. A move that frees a bound the factorization holds refactorizes, and so does
+//! a move of a row (the whole recursion; a move of control bounds alone refactorizes the
+//! stages up to the last one that changed).
+//!
+//! The set is taken from each interior-point solution: the control bounds, state bounds and
+//! general rows whose multiplier exceeds their slack, a soft side among them violated where
+//! its slack exceeds the slack's multiplier (or it has no `l1`). [`QpSolver::shift_active_set`]
+//! moves it, rows included, with the trajectory.
 
-use super::polish::{Side, all_free, initial_sides};
+use super::polish::{Side, initial_sides};
 use super::{Newton, OcpQp, QpInfo, QpSolution, QpSolver, QpStatus, Vect};
 use crate::kernels::{mul, mul_sparse, tr_mul};
 use crate::real::Real;
+use crate::rows::{Rows, Soft};
 use nalgebra::{SMatrix, SVector};
 
 /// Active-set moves after a warm set that missed, at most (each one factorization), before
 /// the interior point takes over.
 const ITERATIONS: usize = 4;
+
+/// Retries (one more pair of steps each) of a solve that holds rows, where the residuals
+/// are near the tolerances: the penalty iteration contracts slowly in f32 or on nearly
+/// dependent rows.
+const ROW_RETRIES: usize = 3;
 
 /// Bounds held through the Schur complement on top of the factorized set in one solve, at
 /// most (module docs); a move past it refactorizes.
@@ -76,30 +110,33 @@ impl<
     const NR: usize,
 > QpSolver<T, NX, NU, NG, NGN, N, NC, NBX, NR>
 {
-    /// Whether the loaded QP has a soft row (the warm active set leaves such QPs to the
-    /// interior point).
+    /// Whether the loaded QP has a soft row (its rows are then set and judged by the
+    /// general residuals).
     fn any_soft(&self) -> bool {
-        self.sg.iter().any(|s| s.any) || self.sgn.any
+        (NG > 0 && self.sg.iter().any(|s| s.any)) || (NGN > 0 && self.sgn.any)
     }
 
     /// The preparation of the warm active set of the Riccati recursion: the stored set, less
-    /// the bounds the QP no longer has, factorized. Returns whether the factorization
-    /// succeeded (`false` also without Riccati storage or with soft rows).
+    /// the bounds and rows the QP no longer has, factorized. Returns whether the
+    /// factorization succeeded (`false` also without Riccati storage).
     pub(super) fn prepare_held<const NH: usize>(
         &mut self,
         qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>,
     ) -> bool {
-        if NR != N || self.any_soft() {
+        if NR != N {
             return false;
         }
         let (lower, upper) = self.present_active_set();
-        self.factorize(qp, Newton::Held(&held(&lower, &upper)))
+        let rows = self.present_rows();
+        self.factorize(qp, Newton::Held(&held(&lower, &upper), &rows))
     }
 
     /// The solve on the warm active set that [`prepare_held`](Self::prepare_held)
     /// factorized (module docs). `Ok` with the solve's outcome, or `Err` with the active-set
     /// solves spent when the interior point must solve the QP (also for a non-finite `x0`,
     /// which it reports; nothing is changed then).
+    // Over 80 lines: one loop of moves and solves whose state (the sets, the factorized
+    // set, the Schur columns, the rows' multipliers) is shared by every branch.
     #[inline(never)]
     pub(super) fn solve_held<const NH: usize>(
         &mut self,
@@ -109,6 +146,10 @@ impl<
             return Err(0);
         }
         let (mut lower, mut upper) = self.stored_active_set();
+        let mut rows = self.act_rows;
+        // The held rows' multipliers, refined by each step (module docs).
+        let mut y = RowVals::ZERO;
+        self.rows_on = rows.any() || self.any_soft();
         self.sol = QpSolution::NEW;
         if let Some(x) = self.sol.x.first_mut() {
             *x = qp.x0;
@@ -128,24 +169,35 @@ impl<
             if round > 0 {
                 let before = held(&lower, &upper);
                 let sets = (lower, upper);
-                if !self.move_held_set(qp, &mut lower, &mut upper) {
-                    self.set_rows_if(qp, unset);
+                let rows_before = rows;
+                let moved = self.move_held_set(qp, &mut lower, &mut upper);
+                if !(self.move_held_rows(qp, &mut rows, &mut y) || moved) {
+                    self.set_rows_if(qp, unset, &rows, &y);
                     return Err(solves);
                 }
                 self.store_active_set(&lower, &upper);
+                self.act_rows = rows;
+                self.rows_on = rows.any() || self.any_soft();
                 let now = held(&lower, &upper);
-                schur = self.hold_by_columns(qp, &factored, &before, &now, &mut cols);
+                // Bounds added through the Schur complement only where no row is held (the
+                // rows' penalty iteration would have to run through it).
+                schur =
+                    !self.rows_on && self.hold_by_columns(qp, &factored, &before, &now, &mut cols);
                 if !schur {
                     // The recursion runs backward: the stages after the last one whose held
                     // controls changed keep their factorization (the last one's, on this
-                    // QP).
-                    let stages = (0..N)
-                        .rev()
-                        .find(|&k| now[k] != factored[k])
-                        .map_or(0, |k| k + 1);
-                    if !self.factorize_stages(qp, Newton::Held(&now), stages) {
+                    // QP); a row that moved refactorizes the whole.
+                    let stages = if rows == rows_before {
+                        (0..N)
+                            .rev()
+                            .find(|&k| now[k] != factored[k])
+                            .map_or(0, |k| k + 1)
+                    } else {
+                        N
+                    };
+                    if !self.factorize_stages(qp, Newton::Held(&now, &rows), stages) {
                         self.act_valid = false;
-                        self.set_rows_if(qp, unset.map(|_| sets));
+                        self.set_rows_if(qp, unset.map(|_| sets), &rows_before, &y);
                         return Err(solves);
                     }
                     factored = now;
@@ -157,13 +209,18 @@ impl<
             if !schur {
                 self.held_controls_on_bounds(&lower, &upper);
             }
-            let mut steps = 1 + self.settings.refine;
-            for retry in [false, true] {
+            // Held rows: one more step (the first gives their multipliers to the penalty's
+            // precision, the second to rounding), and more retries where that leaves them
+            // near the tolerances (a slow contraction: f32, nearly dependent rows).
+            let penalized = rows.any_held();
+            let mut steps = 1 + self.settings.refine + u32::from(penalized);
+            let retries = if penalized { ROW_RETRIES } else { 1 };
+            for retry in 0..=retries {
                 solves += 1;
                 if schur {
                     // The last set's solution plus the bounds' forces is the new set's; each
                     // further step is a Newton step on the factorized set, corrected so.
-                    if !retry {
+                    if retry == 0 {
                         self.correct(qp, &factored, &lower, &cols);
                     }
                     for _ in 0..steps - 1 {
@@ -172,7 +229,7 @@ impl<
                     }
                 } else {
                     for _ in 0..steps {
-                        self.held_step(qp, &factored);
+                        self.held_step_rows(qp, &factored, &rows, &mut y);
                     }
                 }
                 // A free control past its bound by more than the retry's margin: the
@@ -183,7 +240,7 @@ impl<
                     break;
                 }
                 unset = None;
-                let res = self.hold_rows(qp, &lower, &upper);
+                let res = self.hold_all(qp, &lower, &upper, &rows, &y);
                 let st = &self.settings;
                 let within = |f: T| {
                     res[0] <= st.tol_stat * f
@@ -197,13 +254,13 @@ impl<
                 // the tolerances, and one more step mends them; a set that no longer holds
                 // leaves a bound violated or a multiplier of the wrong sign, which it does
                 // not: the set moves.
-                if retry || !within(T::lit(1e4)) {
+                if retry == retries || !within(T::lit(1e4)) {
                     break;
                 }
-                steps = if schur { 2 } else { 1 };
+                steps = if schur || penalized { 2 } else { 1 };
             }
         }
-        self.set_rows_if(qp, unset);
+        self.set_rows_if(qp, unset, &rows, &y);
         Err(solves)
     }
 
@@ -457,7 +514,13 @@ impl<
     ) -> Vect<T, NU> {
         let (s, h) = (&qp.stages[k], qp.h(k));
         let (x, u) = (self.sol.x[k], self.sol.u[k]);
-        mul(&h.r, &u) + mul(&h.s, &x) + s.gu + tr_mul(&s.b, &self.sol.pi[k])
+        let mu = mul(&h.r, &u) + mul(&h.s, &x) + s.gu + tr_mul(&s.b, &self.sol.pi[k]);
+        // With rows set on the held set, their forces `D'(lam_l - lam_u)` too.
+        if NG > 0 && self.rows_on {
+            mu - tr_mul(&s.d, &self.rg[k].dual())
+        } else {
+            mu
+        }
     }
 
     /// The largest violation of a bound by a control that `lower` / `upper` leave free.
@@ -479,16 +542,240 @@ impl<
         m
     }
 
-    /// Sets the rows at the current point on `sets` (as [`hold_rows`](Self::hold_rows)), if
-    /// given.
+    /// Sets the rows at the current point on `sets` and `rows` (as
+    /// [`hold_all`](Self::hold_all)), if given.
     fn set_rows_if<const NH: usize>(
         &mut self,
         qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>,
         sets: Option<Sets<NU, N>>,
+        rows: &Holds<NBX, NG, NGN, N>,
+        y: &RowVals<T, NBX, NG, NGN, N>,
     ) {
         if let Some((lower, upper)) = sets {
-            self.hold_rows(qp, &lower, &upper);
+            self.hold_all(qp, &lower, &upper, rows, y);
         }
+    }
+
+    /// Sets every row from the current point and returns the interior point's residuals
+    /// there (`[stationarity, dynamics, inequality, 0]`): by
+    /// [`hold_rows`](Self::hold_rows) where only control bounds are held and no row is
+    /// soft, else by [`hold_rows_general`](Self::hold_rows_general).
+    fn hold_all<const NH: usize>(
+        &mut self,
+        qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>,
+        lower: &[[bool; NU]; N],
+        upper: &[[bool; NU]; N],
+        rows: &Holds<NBX, NG, NGN, N>,
+        y: &RowVals<T, NBX, NG, NGN, N>,
+    ) -> [T; 4] {
+        if self.rows_on {
+            self.hold_rows_general(qp, lower, upper, rows, y)
+        } else {
+            self.hold_rows(qp, lower, upper)
+        }
+    }
+
+    /// Sets every row from the current point on the held set (module docs: held rows at
+    /// zero slack with their multipliers `y`, violated soft rows with the violation as
+    /// slack and the force `l1 + l2 s`, free rows with multiplier zero; the control bounds
+    /// as [`hold_rows`](Self::hold_rows) does, their multipliers from the controls'
+    /// stationarity with the rows' forces) and returns the interior point's own residuals
+    /// there, [`residuals`](Self::residuals) and [`stationarity`](Self::stationarity):
+    /// `[stationarity, dynamics, inequality, 0]` (complementarity is zero).
+    fn hold_rows_general<const NH: usize>(
+        &mut self,
+        qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>,
+        lower: &[[bool; NU]; N],
+        upper: &[[bool; NU]; N],
+        rows: &Holds<NBX, NG, NGN, N>,
+        y: &RowVals<T, NBX, NG, NGN, N>,
+    ) -> [T; 4] {
+        for k in 0..N {
+            let s = &qp.stages[k];
+            let (x, u) = (self.sol.x[k], self.sol.u[k]);
+            if NBX > 0 {
+                let v = self.rx[k].gather(&x);
+                set_rows(&mut self.rx[k], None, &rows.x[k], &v, &y.x[k]);
+            }
+            if NG > 0 {
+                let v = mul(&s.c, &x) + mul(&s.d, &u);
+                set_rows(
+                    &mut self.rg[k],
+                    Some(&mut self.sg[k]),
+                    &rows.g[k],
+                    &v,
+                    &y.g[k],
+                );
+            }
+            let mu = self.control_multipliers(qp, k);
+            self.ru[k].hold(&u, &mu, &lower[k], &upper[k]);
+        }
+        let xn = self.sol.xn;
+        if NBX > 0 {
+            let v = self.rxn.gather(&xn);
+            set_rows(&mut self.rxn, None, &rows.xn, &v, &y.xn);
+        }
+        if NGN > 0 {
+            let v = mul(&qp.terminal.c, &xn);
+            set_rows(&mut self.rgn, Some(&mut self.sgn), &rows.gn, &v, &y.gn);
+        }
+        let mut res = self.residuals(qp);
+        res[0] = self.stationarity(qp);
+        res[3] = T::ZERO;
+        res
+    }
+
+    /// One Newton step on the held set with the rows as `rows` holds them (module docs):
+    /// [`held_step`](Self::held_step) where no row is held or soft; else its gradients plus
+    /// each row's term (a held row's penalty `w (c - b) - y`, a violated soft side's force
+    /// `l1 + l2 s` with its sign) in the factorization that weighs them so, and the held
+    /// rows' multipliers updated, `y -= w (c - b + a'dz)`.
+    // Over 80 lines: `held_step`'s passes with each of the four row sets' terms (stage and
+    // terminal state bounds and general rows) added in place, which splitting would only
+    // spread over helpers taking the whole state.
+    fn held_step_rows<const NH: usize>(
+        &mut self,
+        qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>,
+        fixed: &[[bool; NU]; N],
+        rows: &Holds<NBX, NG, NGN, N>,
+        y: &mut RowVals<T, NBX, NG, NGN, N>,
+    ) {
+        if !self.rows_on {
+            self.held_step(qp, fixed);
+            return;
+        }
+        let w = penalty::<T>();
+        let mut wr = RowVals::<T, NBX, NG, NGN, N>::ZERO;
+        for k in 0..N {
+            let s = &qp.stages[k];
+            let h = qp.h(k);
+            let (x, u) = (self.sol.x[k], self.sol.u[k]);
+            let next = if k + 1 < N {
+                self.sol.x[k + 1]
+            } else {
+                self.sol.xn
+            };
+            self.rbt[k] = mul_sparse(&s.a, &x) + mul_sparse(&s.b, &u) + s.f - next;
+            let mut gx = mul_sparse(&h.q, &x) + tr_mul(&h.s, &u) + s.gx;
+            let mut gu = mul_sparse(&h.r, &u) + mul_sparse(&h.s, &x) + s.gu;
+            if NBX > 0 {
+                let v = self.rx[k].gather(&x);
+                let (gc, r) = row_terms(&self.rx[k], None, &rows.x[k], &v, &y.x[k], w);
+                gx += self.rx[k].scatter(&gc);
+                wr.x[k] = r;
+            }
+            if NG > 0 {
+                let v = mul(&s.c, &x) + mul(&s.d, &u);
+                let sg = Some(&self.sg[k]);
+                let (gc, r) = row_terms(&self.rg[k], sg, &rows.g[k], &v, &y.g[k], w);
+                gx += tr_mul(&s.c, &gc);
+                gu += tr_mul(&s.d, &gc);
+                wr.g[k] = r;
+            }
+            (self.gxt[k], self.gut[k]) = (gx, gu);
+        }
+        let t = &qp.terminal;
+        let xn = self.sol.xn;
+        let mut gn = mul(&t.q, &xn) + t.gx;
+        if NBX > 0 {
+            let v = self.rxn.gather(&xn);
+            let (gc, r) = row_terms(&self.rxn, None, &rows.xn, &v, &y.xn, w);
+            gn += self.rxn.scatter(&gc);
+            wr.xn = r;
+        }
+        if NGN > 0 {
+            let v = mul(&t.c, &xn);
+            let (gc, r) = row_terms(&self.rgn, Some(&self.sgn), &rows.gn, &v, &y.gn, w);
+            gn += tr_mul(&t.c, &gc);
+            wr.gn = r;
+        }
+        self.gnt = gn;
+        self.lq_solve(qp, Some(fixed));
+        for k in 0..N {
+            let s = &qp.stages[k];
+            let (dx, du) = (self.dx[k], self.du[k]);
+            if k > 0 {
+                self.sol.x[k] += dx;
+            }
+            self.sol.u[k] += du;
+            self.sol.pi[k] = self.pi_new[k];
+            if NBX > 0 {
+                let da = self.rx[k].gather(&dx);
+                update_duals(&rows.x[k], &mut y.x[k], &wr.x[k], &da, w);
+            }
+            if NG > 0 {
+                let da = mul(&s.c, &dx) + mul(&s.d, &du);
+                update_duals(&rows.g[k], &mut y.g[k], &wr.g[k], &da, w);
+            }
+        }
+        let dxn = self.dxn;
+        self.sol.xn += dxn;
+        if NBX > 0 {
+            let da = self.rxn.gather(&dxn);
+            update_duals(&rows.xn, &mut y.xn, &wr.xn, &da, w);
+        }
+        if NGN > 0 {
+            let da = mul(&t.c, &dxn);
+            update_duals(&rows.gn, &mut y.gn, &wr.gn, &da, w);
+        }
+    }
+
+    /// A move of the held rows from the current point (module docs): a held row whose
+    /// multiplier has the wrong sign is freed, a held soft one whose force passed `l1` is
+    /// violated, a violated one whose slack would be negative is held (freed with `l1 =
+    /// 0`), a free row past its bound is held (violated with `l1 = 0`). Returns whether a
+    /// row moved.
+    fn move_held_rows<const NH: usize>(
+        &self,
+        qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>,
+        rows: &mut Holds<NBX, NG, NGN, N>,
+        y: &mut RowVals<T, NBX, NG, NGN, N>,
+    ) -> bool {
+        if Holds::<NBX, NG, NGN, N>::NONE {
+            return false;
+        }
+        let tol = self.settings.tol_ineq.max(self.settings.tol_stat);
+        let mut moved = false;
+        for k in 0..N {
+            let s = &qp.stages[k];
+            let (x, u) = (self.sol.x[k], self.sol.u[k]);
+            if NBX > 0 {
+                let v = self.rx[k].gather(&x);
+                moved |= move_rows(&self.rx[k], None, &mut rows.x[k], &v, &mut y.x[k], tol);
+            }
+            if NG > 0 {
+                let v = mul(&s.c, &x) + mul(&s.d, &u);
+                let sg = Some(&self.sg[k]);
+                moved |= move_rows(&self.rg[k], sg, &mut rows.g[k], &v, &mut y.g[k], tol);
+            }
+        }
+        let xn = self.sol.xn;
+        if NBX > 0 {
+            let v = self.rxn.gather(&xn);
+            moved |= move_rows(&self.rxn, None, &mut rows.xn, &v, &mut y.xn, tol);
+        }
+        if NGN > 0 {
+            let v = mul(&qp.terminal.c, &xn);
+            moved |= move_rows(&self.rgn, Some(&self.sgn), &mut rows.gn, &v, &mut y.gn, tol);
+        }
+        moved
+    }
+
+    /// The stored rows less the sides the loaded QP no longer has (a violated side that is
+    /// no longer soft is held), stored again and returned.
+    fn present_rows(&mut self) -> Holds<NBX, NG, NGN, N> {
+        if Holds::<NBX, NG, NGN, N>::NONE {
+            return Holds::FREE;
+        }
+        let mut rows = self.act_rows;
+        for k in 0..N {
+            present(&self.rx[k], None, &mut rows.x[k]);
+            present(&self.rg[k], Some(&self.sg[k]), &mut rows.g[k]);
+        }
+        present(&self.rxn, None, &mut rows.xn);
+        present(&self.rgn, Some(&self.sgn), &mut rows.gn);
+        self.act_rows = rows;
+        rows
     }
 
     /// A primal-dual active-set move from the current point on the held set: a held control
@@ -653,24 +940,21 @@ impl<
     }
 
     /// Stores the active set of an interior-point solution of the Riccati recursion for the
-    /// next solve: the control bounds whose multiplier exceeds their slack, if no other row
-    /// is active by that rule and the QP has no soft row; else no warm set.
+    /// next solve: the control bounds, state bounds and general rows whose multiplier
+    /// exceeds their slack, a soft one violated where its slack exceeds the slack's
+    /// multiplier (or it has no `l1`).
     pub(super) fn held_set_of_interior_point(&mut self) {
-        if NR != N || self.any_soft() {
+        if NR != N {
             self.act_valid = false;
             return;
         }
-        let free = all_free(&*self.rxn)
-            && all_free(&self.rgn)
-            && self
-                .rx
-                .iter()
-                .zip(&self.rg)
-                .all(|(x, g)| all_free(&**x) && all_free(g));
-        if !free {
-            self.act_valid = false;
-            return;
+        let mut rows = Holds::FREE;
+        for k in 0..N {
+            rows.x[k] = holds_of(&self.rx[k], None);
+            rows.g[k] = holds_of(&self.rg[k], Some(&self.sg[k]));
         }
+        rows.xn = holds_of(&self.rxn, None);
+        rows.gn = holds_of(&self.rgn, Some(&self.sgn));
         let (mut lower, mut upper) = ([[false; NU]; N], [[false; NU]; N]);
         for (k, r) in self.ru.iter().enumerate() {
             for (i, side) in initial_sides(r).iter().enumerate() {
@@ -679,7 +963,322 @@ impl<
             }
         }
         self.store_active_set(&lower, &upper);
+        self.act_rows = rows;
     }
+}
+
+/// Where the warm active set holds a row (a state bound, a general row; a side of it).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Hold {
+    /// Free: force zero.
+    Free,
+    /// Held at its lower bound (the row equals it, a soft row's slack zero): force `y >= 0`
+    /// (`lam_l`, at most `l1` for a soft row).
+    Lower,
+    /// Held at its upper bound: force `y <= 0` (`-lam_u`).
+    Upper,
+    /// A soft row past its lower bound by the slack `s > 0`: force `l1 + l2 s`.
+    OverLower,
+    /// A soft row past its upper bound.
+    OverUpper,
+}
+
+/// The rows of a warm active set, per row set of each stage and the terminal ones (state
+/// bounds by slot).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) struct Holds<const NBX: usize, const NG: usize, const NGN: usize, const N: usize> {
+    pub x: [[Hold; NBX]; N],
+    pub g: [[Hold; NG]; N],
+    pub xn: [Hold; NBX],
+    pub gn: [Hold; NGN],
+}
+
+impl<const NBX: usize, const NG: usize, const NGN: usize, const N: usize> Holds<NBX, NG, NGN, N> {
+    /// Every row free.
+    pub const FREE: Self = Holds {
+        x: [[Hold::Free; NBX]; N],
+        g: [[Hold::Free; NG]; N],
+        xn: [Hold::Free; NBX],
+        gn: [Hold::Free; NGN],
+    };
+
+    /// The solver has no row (no state-bound slot, no general row): every method is then
+    /// trivial, and skipped (QR-bench's solvers).
+    const NONE: bool = NBX == 0 && NG == 0 && NGN == 0;
+
+    /// Every hold, stage by stage.
+    fn all(&self) -> impl Iterator<Item = &Hold> {
+        self.x
+            .iter()
+            .flatten()
+            .chain(self.g.iter().flatten())
+            .chain(&self.xn)
+            .chain(&self.gn)
+    }
+
+    /// Some row is not free.
+    pub fn any(&self) -> bool {
+        !Self::NONE && self.all().any(|h| *h != Hold::Free)
+    }
+
+    /// Some row is held at a bound (its multiplier comes from the penalty iteration).
+    fn any_held(&self) -> bool {
+        !Self::NONE && self.all().any(|h| matches!(h, Hold::Lower | Hold::Upper))
+    }
+
+    /// Moves the rows one stage forward (the last stage's repeated), as
+    /// [`QpSolver::shift_active_set`] does the control bounds.
+    pub fn shift(&mut self) {
+        for k in 1..N {
+            self.x[k - 1] = self.x[k];
+            self.g[k - 1] = self.g[k];
+        }
+    }
+}
+
+/// Values per row of the warm active set (the held rows' multipliers `lam_l - lam_u`, or the
+/// penalty terms of a step).
+#[derive(Clone, Copy)]
+pub(super) struct RowVals<
+    T: Real,
+    const NBX: usize,
+    const NG: usize,
+    const NGN: usize,
+    const N: usize,
+> {
+    x: [Vect<T, NBX>; N],
+    g: [Vect<T, NG>; N],
+    xn: Vect<T, NBX>,
+    gn: Vect<T, NGN>,
+}
+
+impl<T: Real, const NBX: usize, const NG: usize, const NGN: usize, const N: usize>
+    RowVals<T, NBX, NG, NGN, N>
+{
+    const ZERO: Self = RowVals {
+        x: [crate::zeros(); N],
+        g: [crate::zeros(); N],
+        xn: crate::zeros(),
+        gn: crate::zeros(),
+    };
+}
+
+/// The penalty weight `w = 1 / sqrt(eps)` of a held row in the factorization (the polish's):
+/// the factorization is then the KKT system's regularized by `-1/w` in the rows'
+/// multipliers, and each step contracts the multipliers' error by about `1 / (1 + w s)`,
+/// `s` the smallest eigenvalue of the held rows' Schur complement.
+fn penalty<T: Real>() -> T {
+    T::ONE / T::EPSILON.sqrt()
+}
+
+/// The weights the warm active set's rows add to the Hessian along them: [`penalty`] on a
+/// held row, `l2` on a violated soft side, none on a free row.
+pub(super) fn held_weights<T: Real, const K: usize>(
+    holds: &[Hold; K],
+    soft: Option<&Soft<T, K>>,
+) -> Vect<T, K> {
+    let mut v = Vect::<T, K>::zeros();
+    for (i, h) in holds.iter().enumerate() {
+        v[i] = match h {
+            Hold::Free => T::ZERO,
+            Hold::Lower | Hold::Upper => penalty(),
+            Hold::OverLower | Hold::OverUpper => soft.map_or(T::ZERO, |s| s.z2[i]),
+        };
+    }
+    v
+}
+
+/// Each row's gradient coefficient at the values `v` (the gradient is `a` times it): a held
+/// row's `w (v - b) - y`, a violated soft side's `-(l1 + l2 (lo - v))` or `l1 + l2 (v -
+/// hi)`; and the held rows' `w (v - b)` (for the multipliers' update).
+fn row_terms<T: Real, const K: usize>(
+    r: &Rows<T, K>,
+    soft: Option<&Soft<T, K>>,
+    holds: &[Hold; K],
+    v: &Vect<T, K>,
+    y: &Vect<T, K>,
+    w: T,
+) -> (Vect<T, K>, Vect<T, K>) {
+    let (mut gc, mut wr) = (Vect::<T, K>::zeros(), Vect::<T, K>::zeros());
+    for (i, h) in holds.iter().enumerate() {
+        let (z1, z2) = soft.map_or((T::ZERO, T::ZERO), |s| (s.z1[i], s.z2[i]));
+        match h {
+            Hold::Free => {}
+            Hold::Lower | Hold::Upper => {
+                let b = if *h == Hold::Lower { r.lo[i] } else { r.hi[i] };
+                wr[i] = w * (v[i] - b);
+                gc[i] = wr[i] - y[i];
+            }
+            Hold::OverLower => gc[i] = z2 * (v[i] - r.lo[i]) - z1,
+            Hold::OverUpper => gc[i] = z1 + z2 * (v[i] - r.hi[i]),
+        }
+    }
+    (gc, wr)
+}
+
+/// The held rows' multipliers after a step that moved them by `da`: `y -= w (v - b) + w da`.
+fn update_duals<T: Real, const K: usize>(
+    holds: &[Hold; K],
+    y: &mut Vect<T, K>,
+    wr: &Vect<T, K>,
+    da: &Vect<T, K>,
+    w: T,
+) {
+    for (i, h) in holds.iter().enumerate() {
+        if matches!(h, Hold::Lower | Hold::Upper) {
+            y[i] -= wr[i] + w * da[i];
+        }
+    }
+}
+
+/// Sets the rows (and their soft slacks) of an exact solution at the values `v` on the
+/// holds: a held row's multiplier `y` (both sides of an equality row), a violated side's
+/// force `l1 + l2 s`, zero on a free row ([`Rows::hold`], [`Soft::hold`]).
+fn set_rows<T: Real, const K: usize>(
+    r: &mut Rows<T, K>,
+    soft: Option<&mut Soft<T, K>>,
+    holds: &[Hold; K],
+    v: &Vect<T, K>,
+    y: &Vect<T, K>,
+) {
+    let mut mu = Vect::<T, K>::zeros();
+    let (mut lower, mut upper) = ([false; K], [false; K]);
+    let (mut over_l, mut over_u) = ([false; K], [false; K]);
+    for (i, h) in holds.iter().enumerate() {
+        let (z1, z2) = soft
+            .as_ref()
+            .map_or((T::ZERO, T::ZERO), |s| (s.z1[i], s.z2[i]));
+        let pinned = r.has_lo[i] && r.has_hi[i] && r.hi[i] <= r.lo[i];
+        match h {
+            Hold::Free => {}
+            Hold::Lower | Hold::Upper => {
+                mu[i] = y[i];
+                lower[i] = *h == Hold::Lower || pinned;
+                upper[i] = *h == Hold::Upper || pinned;
+            }
+            Hold::OverLower => {
+                mu[i] = z1 + z2 * (r.lo[i] - v[i]);
+                (lower[i], over_l[i]) = (true, true);
+            }
+            Hold::OverUpper => {
+                mu[i] = -(z1 + z2 * (v[i] - r.hi[i]));
+                (upper[i], over_u[i]) = (true, true);
+            }
+        }
+    }
+    r.hold(v, &mu, &lower, &upper);
+    // A held or violated side's slack is zero whatever `v` (`Rows::hold` takes it from `v`,
+    // which a held control meets exactly): a row off its bound shows in the inequality
+    // residual.
+    for i in 0..K {
+        if lower[i] && r.has_lo[i] {
+            r.tl[i] = T::ZERO;
+        }
+        if upper[i] && r.has_hi[i] {
+            r.tu[i] = T::ZERO;
+        }
+    }
+    if let Some(sf) = soft {
+        sf.hold(r, v, &over_l, &over_u);
+    }
+}
+
+/// The move of one row set (see [`QpSolver::move_held_rows`]); returns whether a row
+/// moved. A row that becomes held starts from the multiplier `0`, or `l1` (with its sign)
+/// coming from violated.
+fn move_rows<T: Real, const K: usize>(
+    r: &Rows<T, K>,
+    soft: Option<&Soft<T, K>>,
+    holds: &mut [Hold; K],
+    v: &Vect<T, K>,
+    y: &mut Vect<T, K>,
+    tol: T,
+) -> bool {
+    let mut moved = false;
+    for (i, h) in holds.iter_mut().enumerate() {
+        let (on_l, on_u, z1) =
+            soft.map_or((false, false, T::ZERO), |s| (s.on_l[i], s.on_u[i], s.z1[i]));
+        let (yi, vi) = (y[i], v[i]);
+        let (ys, vs) = (tol * T::ONE.max(yi.abs()), tol * T::ONE.max(vi.abs()));
+        let pinned = r.has_lo[i] && r.has_hi[i] && r.hi[i] <= r.lo[i];
+        let has_l1 = z1 > T::ZERO;
+        let (new, start) = match *h {
+            Hold::Lower if on_l && yi > z1 + ys => (Hold::OverLower, T::ZERO),
+            Hold::Upper if on_u && -yi > z1 + ys => (Hold::OverUpper, T::ZERO),
+            Hold::Lower if yi < -ys && !pinned => (Hold::Free, T::ZERO),
+            Hold::Upper if yi > ys && !pinned => (Hold::Free, T::ZERO),
+            Hold::OverLower if vi > r.lo[i] + vs => {
+                (if has_l1 { Hold::Lower } else { Hold::Free }, z1)
+            }
+            Hold::OverUpper if vi < r.hi[i] - vs => {
+                (if has_l1 { Hold::Upper } else { Hold::Free }, -z1)
+            }
+            Hold::Free if r.has_lo[i] && vi < r.lo[i] - vs => (
+                if on_l && !has_l1 {
+                    Hold::OverLower
+                } else {
+                    Hold::Lower
+                },
+                T::ZERO,
+            ),
+            Hold::Free if r.has_hi[i] && vi > r.hi[i] + vs => (
+                if on_u && !has_l1 {
+                    Hold::OverUpper
+                } else {
+                    Hold::Upper
+                },
+                T::ZERO,
+            ),
+            same => (same, yi),
+        };
+        if new != *h {
+            *h = new;
+            y[i] = start;
+            moved = true;
+        }
+    }
+    moved
+}
+
+/// `holds` less the sides the rows no longer have: a violated side that is no longer soft
+/// is held, a held side that is gone is free.
+fn present<T: Real, const K: usize>(
+    r: &Rows<T, K>,
+    soft: Option<&Soft<T, K>>,
+    holds: &mut [Hold; K],
+) {
+    for (i, h) in holds.iter_mut().enumerate() {
+        let (on_l, on_u) = soft.map_or((false, false), |s| (s.on_l[i], s.on_u[i]));
+        *h = match *h {
+            Hold::Lower | Hold::OverLower if !r.has_lo[i] => Hold::Free,
+            Hold::Upper | Hold::OverUpper if !r.has_hi[i] => Hold::Free,
+            Hold::OverLower if !on_l => Hold::Lower,
+            Hold::OverUpper if !on_u => Hold::Upper,
+            same => same,
+        };
+    }
+}
+
+/// The holds of an interior-point solution's rows: the sides whose multiplier exceeds their
+/// slack ([`initial_sides`]), a soft side violated where its slack exceeds the slack's
+/// multiplier or it has no `l1`.
+fn holds_of<T: Real, const K: usize>(r: &Rows<T, K>, soft: Option<&Soft<T, K>>) -> [Hold; K] {
+    let mut holds = [Hold::Free; K];
+    for (i, (h, side)) in holds.iter_mut().zip(initial_sides(r)).enumerate() {
+        let over = |on: bool, s: T, m: T, z1: T| on && (s > m || z1 <= T::ZERO);
+        *h = match (side, soft) {
+            (Side::Lower, Some(sf)) if over(sf.on_l[i], sf.sl[i], sf.ml[i], sf.z1[i]) => {
+                Hold::OverLower
+            }
+            (Side::Upper, Some(sf)) if over(sf.on_u[i], sf.su[i], sf.mu[i], sf.z1[i]) => {
+                Hold::OverUpper
+            }
+            (Side::Lower, _) => Hold::Lower,
+            (Side::Upper, _) => Hold::Upper,
+            (Side::Free, _) => Hold::Free,
+        };
+    }
+    holds
 }
 
 /// Bounds held through the Schur complement on top of the factorized set: their stages
@@ -909,7 +1508,7 @@ mod tests {
     ) -> QpSolution<f64, 3, 2, 6> {
         let mut plain = solver.clone();
         let now = held(lower, upper);
-        assert!(plain.factorize(qp, Newton::Held(&now)));
+        assert!(plain.factorize(qp, Newton::Held(&now, &Holds::FREE)));
         plain.sol = QpSolution::NEW;
         plain.sol.x[0] = qp.x0;
         for k in 0..6 {
@@ -953,7 +1552,7 @@ mod tests {
         lower[1][0] = true;
         let factored = held(&lower, &upper);
         solver.sol = solved_on(&qp, &solver, &lower, &upper);
-        assert!(solver.factorize(&qp, Newton::Held(&factored)));
+        assert!(solver.factorize(&qp, Newton::Held(&factored, &Holds::FREE)));
         let mut cols = Columns::new();
         // Each move: the bounds it adds (stage, control, lower), the columns it frees, and
         // the columns after it.
@@ -1000,7 +1599,7 @@ mod tests {
             let g = gap(&solver.sol, &want);
             assert!(g < 1e-9, "move {round}: {g:e}");
             let mut plain = solver.clone();
-            assert!(plain.factorize(&qp, Newton::Held(&now)));
+            assert!(plain.factorize(&qp, Newton::Held(&now, &Holds::FREE)));
             plain.sol = want;
             plain.held_step(&qp, &now);
             let mut refined = solver.clone();
@@ -1031,7 +1630,7 @@ mod tests {
         solver.sol.xn *= 0.5;
         assert!(gap(&solver.sol, &want) > 1e-2);
         let mut plain = solver.clone();
-        assert!(plain.factorize(&qp, Newton::Held(&now)));
+        assert!(plain.factorize(&qp, Newton::Held(&now, &Holds::FREE)));
         plain.held_step(&qp, &now);
         solver.held_step(&qp, &factored);
         solver.correct(&qp, &factored, &lower, &cols);
@@ -1064,17 +1663,17 @@ mod tests {
         let mut before = [[false; 2]; 6];
         before[4][1] = true;
         before[1][0] = true;
-        assert!(part.factorize(&qp, Newton::Held(&before)));
+        assert!(part.factorize(&qp, Newton::Held(&before, &Holds::FREE)));
         let mut after = before;
         after[2][1] = true;
         after[1][0] = false;
         let mut whole = part.clone();
-        assert!(whole.factorize(&qp, Newton::Held(&after)));
+        assert!(whole.factorize(&qp, Newton::Held(&after, &Holds::FREE)));
         let mut short = part.clone();
-        assert!(part.factorize_stages(&qp, Newton::Held(&after), 3));
+        assert!(part.factorize_stages(&qp, Newton::Held(&after, &Holds::FREE), 3));
         assert!(part.linv == whole.linv && part.wt == whole.wt && part.pn == whole.pn);
         // Stage 2 changed: refactorizing stages 1 and 0 alone is not the factorization.
-        assert!(short.factorize_stages(&qp, Newton::Held(&after), 2));
+        assert!(short.factorize_stages(&qp, Newton::Held(&after, &Holds::FREE), 2));
         assert!(short.linv != whole.linv || short.wt != whole.wt);
     }
 }

@@ -32,6 +32,7 @@
 //! meet the tolerances; else the interior point's solution is kept. QPs with soft rows are
 //! not polished.
 
+use super::held::{Hold, held_weights};
 use super::{Newton, OcpQp, QpSolution, QpSolver, Vect};
 use crate::kernels::tr_mul;
 use crate::real::Real;
@@ -202,6 +203,9 @@ pub(super) enum Weight<'a, T, const K: usize> {
     Barrier,
     /// The polish's: `w` on the active rows, none on the others.
     Active(&'a [Side; K], T),
+    /// The warm active set's rows ([`Hold`]): the penalty weight on the held ones, a
+    /// violated soft side's `l2`, none on the others.
+    Held(&'a [Hold; K]),
     /// None.
     Zero,
 }
@@ -215,6 +219,7 @@ pub(super) fn weights<T: Real, const K: usize>(
     match weight {
         Weight::Barrier => rows.sigma(soft),
         Weight::Zero => Vect::zeros(),
+        Weight::Held(holds) => held_weights(holds, soft),
         Weight::Active(sides, w) => {
             let mut v = Vect::<T, K>::zeros();
             for (vi, side) in v.iter_mut().zip(sides) {
@@ -241,11 +246,6 @@ pub(super) fn initial_sides<T: Real, const K: usize>(r: &Rows<T, K>) -> [Side; K
         };
     }
     sides
-}
-
-/// Whether no side is active by [`initial_sides`]' rule.
-pub(super) fn all_free<T: Real, const K: usize>(r: &Rows<T, K>) -> bool {
-    initial_sides(r).iter().all(|s| *s == Side::Free)
 }
 
 /// Distance of the active rows' values `v` from their bounds (zero on free rows).
