@@ -1319,7 +1319,8 @@ impl<
     }
 
     /// Whether every general row with a bound is soft ([`kkt_residual`](Self::kkt_residual)
-    /// knows its multipliers: soft rows are solved by the interior point alone).
+    /// knows its multipliers: every QP path that solves soft rows, the interior point and
+    /// the warm active set, sets them).
     fn rows_kkt_known(&self) -> bool {
         fn all_soft<T: Real, const K: usize>(
             lo: &SVector<T, K>,
