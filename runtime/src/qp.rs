@@ -1037,7 +1037,15 @@ impl<
             };
             match warm {
                 Ok(info) => return info,
-                Err(n) => solves = n,
+                // Where rows were held, their multipliers come from a penalty iteration that
+                // did not settle (a soft row's may be far beyond its `l1`): the interior point
+                // starts afresh rather than from them.
+                Err(n) => {
+                    solves = n;
+                    if self.rows_on {
+                        self.dual_valid = false;
+                    }
+                }
             }
         }
         let mut info = self.iterate(qp);
