@@ -544,11 +544,9 @@ fn report(g: &Graph, ocp: &Ocp<'_>) -> mpc_dsl::Result<String> {
     Ok(o)
 }
 
-/// The model's dimensions, horizon, cost terms, bounds and constraints.
-fn describe(ocp: &Ocp<'_>) -> String {
-    use std::fmt::Write as _;
-    let mut o = String::new();
-    let integ = match &ocp.dynamics {
+/// The dynamics and their discretization, in words.
+fn dynamics_words(dynamics: &Dynamics<'_>) -> String {
+    match dynamics {
         Dynamics::Continuous {
             integrator: Integrator::Rk4 { steps },
             ..
@@ -575,7 +573,14 @@ fn describe(ocp: &Ocp<'_>) -> String {
             }
         ),
         Dynamics::Discrete { .. } => "discrete map".into(),
-    };
+    }
+}
+
+/// The model's dimensions, horizon, cost terms, bounds and constraints.
+fn describe(ocp: &Ocp<'_>) -> String {
+    use std::fmt::Write as _;
+    let mut o = String::new();
+    let integ = dynamics_words(&ocp.dynamics);
     let params = ocp
         .parameters
         .iter()

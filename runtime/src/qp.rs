@@ -1560,6 +1560,8 @@ impl<
     /// factorization whose `mode` and QP differ from the last one's only at those stages
     /// ends as a whole one would, bit for bit: the recursion runs backward, and stage `k`
     /// reads only `P_{k+1}`.
+    // Over 80 lines: the terminal stage and the backward loop share the in-place storage of
+    // `P` (each stage reads its successor's and overwrites it), which one body keeps visible.
     fn factorize_stages<const NH: usize>(
         &mut self,
         qp: &OcpQp<T, NX, NU, NG, NGN, N, NH>,

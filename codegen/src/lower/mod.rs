@@ -365,6 +365,8 @@ pub fn lower<'g>(ocp: &Ocp<'g>) -> Result<Lowered, CodegenError> {
 ///
 /// # Errors
 /// As [`lower`].
+// Over 80 lines: half of it is the `Lowered` literal, and the steps before it must stay in
+// one place, in their order (below).
 pub fn lower_with<'g>(ocp: &Ocp<'g>, exact_hessian: bool) -> Result<Lowered, CodegenError> {
     // The steps in the order they add to the graph and may fail: changing it may change the
     // generated code (the graph's numbering) and which error is reported first.

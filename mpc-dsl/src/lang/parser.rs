@@ -597,35 +597,11 @@ impl<'s, 'g> Parser<'s, 'g> {
                 ));
             }
         };
-        let mut integrator = Integrator::Rk4 { steps: 1 };
-        if !discrete {
-            let ispan = self.span();
-            let (name, _) = self.ident("an integrator (`rk4`, `euler` or `irk`)")?;
-            integrator = match name.as_str() {
-                "rk4" => {
-                    let mut steps = 1;
-                    if self.peek() == Some(&Tok::LParen) {
-                        self.pos += 1;
-                        steps = self.count("the number of RK4 substeps")?;
-                        self.expect(&Tok::RParen, "`)`")?;
-                    }
-                    Integrator::Rk4 { steps }
-                }
-                "euler" => Integrator::Euler,
-                "irk" => self.irk_options()?,
-                other => {
-                    return Err(syntax(
-                        ispan,
-                        format!(
-                            "unknown integrator `{other}`: use `rk4`, `rk4(k)`, `euler` or \
-                             `irk(stages = s, steps = k, newton = n)`"
-                        ),
-                    ));
-                }
-            };
-            self.spans
-                .insert("integrator".into(), ispan.start..self.prev_end());
-        }
+        let integrator = if discrete {
+            Integrator::Rk4 { steps: 1 }
+        } else {
+            self.integrator()?
+        };
         let head = start.start..self.prev_end();
         let eq_kw = if discrete { "next" } else { "der" };
         let mut eqs: HashMap<String, (Vec<Expr<'g>>, Span)> = HashMap::new();
@@ -694,6 +670,38 @@ impl<'s, 'g> Parser<'s, 'g> {
             self.b.ode(&all, integrator);
         }
         Ok(())
+    }
+
+    /// `rk4`, `rk4(k)`, `euler` or `irk(...)`, after `dynamics ode`; its span is kept for
+    /// the validation's errors.
+    fn integrator(&mut self) -> PResult<Integrator> {
+        let ispan = self.span();
+        let (name, _) = self.ident("an integrator (`rk4`, `euler` or `irk`)")?;
+        let integrator = match name.as_str() {
+            "rk4" => {
+                let mut steps = 1;
+                if self.peek() == Some(&Tok::LParen) {
+                    self.pos += 1;
+                    steps = self.count("the number of RK4 substeps")?;
+                    self.expect(&Tok::RParen, "`)`")?;
+                }
+                Integrator::Rk4 { steps }
+            }
+            "euler" => Integrator::Euler,
+            "irk" => self.irk_options()?,
+            other => {
+                return Err(syntax(
+                    ispan,
+                    format!(
+                        "unknown integrator `{other}`: use `rk4`, `rk4(k)`, `euler` or \
+                         `irk(stages = s, steps = k, newton = n)`"
+                    ),
+                ));
+            }
+        };
+        self.spans
+            .insert("integrator".into(), ispan.start..self.prev_end());
+        Ok(integrator)
     }
 
     fn weight(&mut self) -> PResult<(Matrix<'g>, Span)> {
