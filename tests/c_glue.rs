@@ -95,26 +95,7 @@ fn a_c_program_builds_with_the_generated_glue() {
     // With the line mpcc printed (the warnings flags added).
     let main_c = c_dir.join("main.c");
     let exe = tmp.0.join("printed");
-    let mut words = link_line.split_whitespace();
-    let mut cmd = Command::new(words.next().expect("a compiler"));
-    for w in words {
-        if w == "main.c" {
-            cmd.arg(&main_c);
-        } else {
-            cmd.arg(w);
-        }
-    }
-    cmd.args([
-        "-std=c11",
-        "-Wall",
-        "-Wextra",
-        "-Werror",
-        "-pedantic",
-        "-O2",
-        "-o",
-    ])
-    .arg(&exe);
-    run(&mut cmd, "the printed compile and link line");
+    common::build_with_printed_line(link_line, &main_c, &exe);
     assert_eq!(
         fly(&exe, "the program built by the printed line"),
         with_make

@@ -138,24 +138,11 @@ fn a_general_cost_model_solves_from_rust_and_c() {
     // C, on the static library.
     cargo(&["build", "--release"]);
     let exe = tmp.0.join("solve_c");
-    run(
-        Command::new("cc")
-            .arg(repo().join("tests/general-cost/main.c"))
-            .arg(format!("-I{out_dir}/include"))
-            .arg(target.join(format!("release/lib{NAME}.a")))
-            .args([
-                "-lpthread",
-                "-ldl",
-                "-lm",
-                "-std=c11",
-                "-Wall",
-                "-Wextra",
-                "-Werror",
-                "-O2",
-                "-o",
-            ])
-            .arg(&exe),
-        "cc",
+    common::build_c(
+        &repo().join("tests/general-cost/main.c"),
+        &crate_dir.join("include"),
+        &target.join(format!("release/lib{NAME}.a")),
+        &exe,
     );
     let out = run(&mut Command::new(&exe), "the C program");
     let c_iters = check(&String::from_utf8_lossy(&out.stdout), "C");

@@ -53,26 +53,7 @@ fn a_c_program_flies_the_irk_solver() {
     );
     let main_c = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/c-irk/main.c");
     let exe = tmp.0.join("irk_loop");
-    let mut words = link_line.split_whitespace();
-    let mut cmd = Command::new(words.next().expect("a compiler"));
-    for w in words {
-        if w == "main.c" {
-            cmd.arg(&main_c);
-        } else {
-            cmd.arg(w);
-        }
-    }
-    cmd.args([
-        "-std=c11",
-        "-Wall",
-        "-Wextra",
-        "-Werror",
-        "-pedantic",
-        "-O2",
-        "-o",
-    ])
-    .arg(&exe);
-    run(&mut cmd, "the printed compile and link line");
+    common::build_with_printed_line(link_line, &main_c, &exe);
     let out = run(&mut Command::new(&exe), "the C closed loop");
     let line = String::from_utf8_lossy(&out.stdout).trim().to_string();
     println!("C closed loop (s v F ok): {line}");

@@ -268,23 +268,7 @@ fn soft_bounds_match_their_closed_form_optima_and_the_soft_rows() {
     );
     let lib = target.join("release/libsoft_box.a");
     let main_c = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/soft-bounds/main.c");
-    run(
-        Command::new("cc")
-            .args([
-                "-std=c11",
-                "-Wall",
-                "-Wextra",
-                "-Werror",
-                "-pedantic",
-                "-O2",
-            ])
-            .arg(&main_c)
-            .arg(format!("-I{}", crate_dir.join("include").display()))
-            .arg(&lib)
-            .args(["-lpthread", "-ldl", "-lm", "-o"])
-            .arg(&exe),
-        "cc",
-    );
+    common::build_c(&main_c, &crate_dir.join("include"), &lib, &exe);
     let out = run(&mut Command::new(&exe), "the C program");
     let text = String::from_utf8_lossy(&out.stdout).into_owned();
     let x3: f64 = (text.strip_prefix("x3 ").and_then(|t| t.trim().parse().ok()))

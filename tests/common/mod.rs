@@ -97,6 +97,55 @@ pub fn run(cmd: &mut Command, what: &str) -> std::process::Output {
     out
 }
 
+/// The warnings every C program of the tests is compiled with (C11, warnings as errors).
+#[allow(dead_code)] // not every test binary that includes this module compiles C
+pub const C_FLAGS: [&str; 6] = [
+    "-std=c11",
+    "-Wall",
+    "-Wextra",
+    "-Werror",
+    "-pedantic",
+    "-O2",
+];
+
+/// Compiles `main_c` with the compile and link line `mpcc build --staticlib` printed (its
+/// `main.c` replaced by `main_c`) and [`C_FLAGS`], into `exe`.
+#[allow(dead_code)] // not every test binary that includes this module compiles C
+pub fn build_with_printed_line(link_line: &str, main_c: &std::path::Path, exe: &std::path::Path) {
+    let mut words = link_line.split_whitespace();
+    let mut cmd = Command::new(words.next().expect("a compiler"));
+    for w in words {
+        if w == "main.c" {
+            cmd.arg(main_c);
+        } else {
+            cmd.arg(w);
+        }
+    }
+    cmd.args(C_FLAGS).arg("-o").arg(exe);
+    run(&mut cmd, "the printed compile and link line");
+}
+
+/// Compiles `main_c` against the generated header in `include` and links the static library
+/// `lib` (with the system libraries a Rust static library needs) and [`C_FLAGS`], into `exe`.
+#[allow(dead_code)] // not every test binary that includes this module compiles C
+pub fn build_c(
+    main_c: &std::path::Path,
+    include: &std::path::Path,
+    lib: &std::path::Path,
+    exe: &std::path::Path,
+) {
+    run(
+        Command::new("cc")
+            .args(C_FLAGS)
+            .arg(main_c)
+            .arg(format!("-I{}", include.display()))
+            .arg(lib)
+            .args(["-lpthread", "-ldl", "-lm", "-o"])
+            .arg(exe),
+        "cc",
+    );
+}
+
 /// A directory removed when dropped (also when the test fails).
 #[allow(dead_code)] // not every test binary that includes this module makes one
 pub struct TempDir(pub std::path::PathBuf);
