@@ -221,25 +221,13 @@ pub(super) fn dynamics_hessian<'g>(
     b: &Builder<'g>,
     x_next: &Vector<'g>,
 ) -> Result<Function, CodegenError> {
-    let nx = v.x.len();
     let mut lagrangian = v.g.zero();
     for (&e, &m) in x_next.iter().zip(&v.pi) {
         lagrangian += m * e;
     }
     let mut wrt = v.x.clone();
     wrt.extend(v.u.iter().copied());
-    let hess = v.g.hessian(lagrangian, &wrt)?;
-    let mut out = Vec::with_capacity(hess.nnz());
-    for (i, j, e) in hess.iter() {
-        let target = match (i < nx, j < nx) {
-            (true, true) => Target::Mat("hxx", i, j),
-            (false, true) => Target::Mat("hux", i - nx, j),
-            (false, false) => Target::Mat("huu", i - nx, j - nx),
-            // The upper right block is `hux` transposed.
-            (true, false) => continue,
-        };
-        out.push((e, target));
-    }
+    let out = super::general_cost::hessian_targets(v, lagrangian, &wrt)?;
     b.function("dynamics Hessian", &[Arg::X, Arg::U, Arg::P, Arg::Pi], out)
 }
 

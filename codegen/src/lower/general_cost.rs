@@ -83,7 +83,7 @@ fn value_gradient_hessian<'g>(
 /// The Hessian of the scalar `f` over `wrt` (the solver's states, then maybe the controls)
 /// as `hxx`, `hux` (controls by states) and `huu`; the upper right block, `hux` transposed,
 /// is left out.
-fn hessian_targets<'g>(
+pub(super) fn hessian_targets<'g>(
     v: &Symbols<'g>,
     f: Expr<'g>,
     wrt: &[Expr<'g>],
