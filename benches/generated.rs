@@ -1,4 +1,5 @@
-//! Criterion benchmarks of the generated solvers (`generated/`), each in its closed loop:
+//! Criterion benchmarks of the generated solvers (`mpc-models`, the code of `generated/`),
+//! each in its closed loop:
 //!
 //! - `qrbench/<case>/{prepare,feedback,step}` for QR-bench with N = 10, 20, 40 in f64 and f32
 //!   (`quadrotor_rates_a`, `quadrotor_rates`, `quadrotor_rates_n40` and their `_f32`
@@ -59,7 +60,7 @@ macro_rules! closed_loop_group {
 
 macro_rules! qrbench {
     ($c:expr, $m:ident, $name:expr) => {{
-        use $m as m;
+        use mpc_models::$m as m;
         let new = || {
             let mut s = Box::new(m::Solver::new());
             let x0: [m::Real; 10] = X0.map(|v| v as m::Real);
@@ -84,7 +85,7 @@ fn benches(c: &mut Criterion) {
     qrbench!(c, quadrotor_rates_n40_f32, "qrbench/N40_f32");
 
     {
-        use paper_pointmass as m;
+        use mpc_models::paper_pointmass as m;
         let new = || {
             let mut s = Box::new(m::Solver::new());
             let mut xref = [0.0; 9];
@@ -100,7 +101,7 @@ fn benches(c: &mut Criterion) {
     }
 
     {
-        use quadrotor_probe as m;
+        use mpc_models::quadrotor_probe as m;
         let new = || {
             let s = Box::new(m::Solver::new());
             let x0 = s.state(0).unwrap_or([0.0; m::NX_MODEL]);

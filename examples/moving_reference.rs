@@ -1,7 +1,7 @@
-//! QR-bench A (`generated/quadrotor_rates_a`) tracking a reference that moves at every
-//! control step: the target position slides from (0, 0, 2) to (4, 0, 2) over the 4 s, set
-//! with `set_xref_all` before each preparation, as a tracking controller does. For
-//! instruction counts:
+//! QR-bench A (`mpc_models::quadrotor_rates_a`, the code of `generated/quadrotor_rates_a`)
+//! tracking a reference that moves at every control step: the target position slides from (0,
+//! 0, 2) to (4, 0, 2) over the 4 s, set with `set_xref_all` before each preparation, as a
+//! tracking controller does. For instruction counts:
 //!
 //! ```sh
 //! cargo build --release --example moving_reference
@@ -11,8 +11,8 @@
 //!
 //! (divide by the 100 steps). Prints the final state.
 
+use mpc_models::quadrotor_rates_a as m;
 use mpc_sim::qrbench::{X0, plant};
-use quadrotor_rates_a as m;
 
 fn main() {
     let mut s = Box::new(m::Solver::new());

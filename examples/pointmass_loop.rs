@@ -1,6 +1,7 @@
-//! The paper's point-mass MPC (`generated/paper_pointmass`) tracking a 1 m step in x for 100
-//! control steps, with the exact triple-integrator plant (the closed loop of
-//! `cargo bench --bench generated -- pointmass`), once: for instruction counts,
+//! The paper's point-mass MPC (`mpc_models::paper_pointmass`, the code of
+//! `generated/paper_pointmass`) tracking a 1 m step in x for 100 control steps, with the exact
+//! triple-integrator plant (the closed loop of `cargo bench --bench generated -- pointmass`),
+//! once: for instruction counts,
 //!
 //! ```sh
 //! cargo build --release --example pointmass_loop
@@ -10,7 +11,7 @@
 //!
 //! (divide by the 100 steps). Prints the QP iterations and the final state.
 
-use paper_pointmass as m;
+use mpc_models::paper_pointmass as m;
 
 fn main() {
     let mut s = Box::new(m::Solver::new());

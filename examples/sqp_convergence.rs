@@ -1,14 +1,15 @@
 //! How the full SQP (`Solver::solve_sqp`, Gauss-Newton with a merit line search) converges on
-//! QR-bench A (`generated/quadrotor_rates_a`): the SQP iterations of every step of the closed
-//! loop (`mpcc bench --sqp` reports their mean), then, at two steps, the largest difference
-//! of the controls after `k` iterations from the step's solution converged to 1e-12:
+//! QR-bench A (`mpc_models::quadrotor_rates_a`, the code of `generated/quadrotor_rates_a`): the
+//! SQP iterations of every step of the closed loop (`mpcc bench --sqp` reports their mean),
+//! then, at two steps, the largest difference of the controls after `k` iterations from the
+//! step's solution converged to 1e-12:
 //!
 //! ```sh
 //! cargo run --release --example sqp_convergence
 //! ```
 
+use mpc_models::quadrotor_rates_a as m;
 use mpc_sim::qrbench::{X0, plant};
-use quadrotor_rates_a as m;
 
 /// The largest difference between two plans' controls.
 fn plan_difference(a: &m::Solver, b: &m::Solver) -> f64 {

@@ -113,7 +113,7 @@ const U_HOVER: [f64; 4] = [9.81, 0.0, 0.0, 0.0];
 /// Flies QR-bench once with solver crate `$m` (its `Real` may be f32 or f64).
 macro_rules! fly {
     ($m:ident, $sqp:expr, $over:expr) => {{
-        use $m as m;
+        use mpc_models::$m as m;
         let mut s = Box::new(m::Solver::new());
         let over: Overrides = $over;
         if let Some(loose) = over.loose {
@@ -169,7 +169,7 @@ const POINTMASS: &str = "paper_pointmass (the paper's point-mass MPC: N = 10, dt
 /// Flies the point mass once: from rest at the origin to the reference 1 m along x (the
 /// closed loop of `cargo bench --bench generated -- pointmass`).
 fn fly_pointmass(sqp: bool, over: Overrides) -> ClosedLoop {
-    use paper_pointmass as m;
+    use mpc_models::paper_pointmass as m;
     let mut s = Box::new(m::Solver::new());
     if let Some(loose) = over.loose {
         s.settings_mut().sqp_loose_qps = loose;

@@ -8,86 +8,67 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
 use indicatif::ProgressBar;
-use mpc_codegen::{Options, RuntimeDep};
 use mpc_dsl::Graph;
 use mpc_dsl::lang::{ParseOptions, parse};
 use mpc_sim::mission::Phase;
 
-/// A generated solver the simulator links: its controller name, the model it comes from and
-/// the crate's directory, with the text of both embedded at build time (nothing is read from
-/// the checkout at run time, so an installed `mpcc` runs from any directory).
+/// A generated solver the simulator links: its controller name, the model file it comes
+/// from, the model's text and the module `mpc-models`' build script generated from it (both
+/// embedded at build time: nothing is read from the checkout at run time, so an installed
+/// `mpcc` runs from any directory).
 struct Linked {
     controller: &'static str,
     model: &'static str,
     source: &'static str,
-    dir: &'static str,
-    files: [(&'static str, &'static str); 3],
-}
-
-macro_rules! linked {
-    ($controller:literal, $name:literal) => {
-        Linked {
-            controller: $controller,
-            model: concat!("models/", $name, ".mpc"),
-            source: include_str!(concat!("../models/", $name, ".mpc")),
-            dir: concat!("generated/", $name),
-            files: [
-                (
-                    "Cargo.toml",
-                    include_str!(concat!("../generated/", $name, "/Cargo.toml")),
-                ),
-                (
-                    "src/lib.rs",
-                    include_str!(concat!("../generated/", $name, "/src/lib.rs")),
-                ),
-                (
-                    concat!("include/", $name, ".h"),
-                    include_str!(concat!("../generated/", $name, "/include/", $name, ".h")),
-                ),
-            ],
-        }
-    };
+    module: &'static str,
 }
 
 /// The generated solvers the simulator links.
 const SOLVERS: [Linked; 3] = [
-    linked!("paper", "paper_pointmass"),
-    linked!("nmpc", "quadrotor_rates"),
-    linked!("probe", "quadrotor_probe"),
+    Linked {
+        controller: "paper",
+        model: "models/paper_pointmass.mpc",
+        source: mpc_models::source::PAPER_POINTMASS,
+        module: mpc_models::generated::PAPER_POINTMASS,
+    },
+    Linked {
+        controller: "nmpc",
+        model: "models/quadrotor_rates.mpc",
+        source: mpc_models::source::QUADROTOR_RATES,
+        module: mpc_models::generated::QUADROTOR_RATES,
+    },
+    Linked {
+        controller: "probe",
+        model: "models/quadrotor_probe.mpc",
+        source: mpc_models::source::QUADROTOR_PROBE,
+        module: mpc_models::generated::QUADROTOR_PROBE,
+    },
 ];
 
-/// Regenerates the controller's solver from its model and compares it with the crate the
-/// simulator is built with: a stale crate would fly another controller than the model says.
+/// Generates the controller's solver from its model with this binary's generator and
+/// compares it with the module the simulator is built with (which `mpc-models`' build script
+/// generated): a difference means the binary flies another controller than its model says.
 pub(crate) fn check_solver(controller: &str, quiet: bool) -> Result<(), String> {
     let Some(s) = SOLVERS.iter().find(|s| s.controller == controller) else {
         return Ok(());
     };
-    let (model, dir) = (s.model, s.dir);
-    let opts = Options {
-        runtime: RuntimeDep::Path("../../runtime".into()),
-        ..Options::new()
-    };
     let t = Instant::now();
     let g = Graph::new();
     let parsed =
-        parse(&g, s.source, &ParseOptions::default()).map_err(|d| d.render(model, s.source))?;
-    let generated =
-        mpc_codegen::generate(&parsed.ocp, &opts).map_err(|e| format!("{model}: {e}"))?;
-    let stale: Vec<&str> = s
-        .files
-        .iter()
-        .filter(|(rel, text)| generated.file(rel) != Some(*text))
-        .map(|(rel, _)| *rel)
-        .collect();
-    if !stale.is_empty() || generated.files.len() != s.files.len() {
+        parse(&g, s.source, &ParseOptions::default()).map_err(|d| d.render(s.model, s.source))?;
+    let (name, generated) = mpc_codegen::Builder::from_ocp()
+        .module_source(&parsed.ocp)
+        .map_err(|e| format!("{}: {e}", s.model))?;
+    if generated != s.module {
         return Err(format!(
-            "{dir} is not what {model} generates ({stale:?} differ): regenerate it with \
-             `cargo run -- build {model} --runtime-path ../../runtime -o {dir}` and rebuild"
+            "the solver `{name}` linked is not what {} generates: rebuild mpcc (`cargo build`)",
+            s.model
         ));
     }
     if !quiet {
         eprintln!(
-            "solver: generated {dir} from {model} in {:.0} ms (identical to the crate linked)",
+            "solver: generated `{name}` from {} in {:.0} ms (identical to the solver linked)",
+            s.model,
             t.elapsed().as_secs_f64() * 1e3
         );
     }

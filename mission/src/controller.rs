@@ -23,6 +23,7 @@
 
 use std::time::Instant;
 
+use mpc_models::{paper_pointmass, quadrotor_rates};
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
 use crate::estimate::Estimate;

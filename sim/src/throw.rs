@@ -62,8 +62,8 @@
 
 use std::time::Instant;
 
+use mpc_models::quadrotor_probe as pm;
 use nalgebra::{SVector, UnitQuaternion, Vector3};
-use quadrotor_probe as pm;
 use rand::SeedableRng;
 use rand::rngs::StdRng;
 use rand_distr::{Distribution, Normal};

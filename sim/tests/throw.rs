@@ -232,7 +232,7 @@ fn the_plan_releases_at_the_asked_velocity_and_lands_past_the_target() {
         "{:?}",
         plan.planned_landing
     );
-    assert_eq!(plan.states.len(), 2 * quadrotor_probe::N + 1);
+    assert_eq!(plan.states.len(), 2 * mpc_models::quadrotor_probe::N + 1);
 }
 
 #[test]
