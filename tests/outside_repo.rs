@@ -1,16 +1,17 @@
 //! mpcc and its crates away from this checkout: the `mpcc` binary run from an empty
-//! directory (what `cargo install --path .` gives: the test binary is the same executable,
-//! built from the same sources with models, templates and the runtime's source embedded, only
-//! in another profile), a generated crate with the runtime vendored built offline for the host
-//! and for a bare-metal target and again after being moved, and a crate with the default
-//! versioned dependency built against `mpc-runtime` as `cargo package` packs it, and a fresh
-//! project that has only the three packed library crates generates a solver in its
-//! `build.rs`, builds and runs it.
+//! directory, as the tests build it and as `cargo install` installs it from the packaged
+//! crates (whose sources are then deleted: models, templates and the runtime's source are
+//! embedded), a generated crate with the runtime vendored built offline for the host and for
+//! a bare-metal target and again after being moved, a crate with the default versioned
+//! dependency built against `mpc-runtime` as `cargo package` packs it, and a fresh project
+//! that has only the packed library crates generates a solver in its `build.rs`, builds and
+//! runs it.
 //!
-//! The builds are offline: nalgebra and libm are in cargo's cache from this workspace's build.
+//! The builds are offline: the dependencies are in cargo's cache from this workspace's build.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
+use std::sync::OnceLock;
 
 /// An empty directory under the system's temporary directory, outside this repository.
 fn scratch(name: &str) -> PathBuf {
@@ -71,35 +72,120 @@ fn cargo_in(dir: &Path, args: &[&str]) -> String {
     shown
 }
 
+/// The crates a registry would serve, in dependency order: `mpcc` and every crate it needs.
+const PUBLISHED: [&str; 9] = [
+    "mpc-dsl",
+    "mpc-runtime",
+    "mpc-codegen",
+    "mpc-models",
+    "mpc-mission",
+    "mpc-sim",
+    "firmware-shim",
+    "px4-sim",
+    "mpcc",
+];
+
+/// The `.crate` files of [`PUBLISHED`] as `cargo package` packs them, packed once for all
+/// tests of this file (they run in parallel and read the same files). Not `cargo package`'s
+/// own verification: it builds the packed crates as registry crates of version 0.1.0, whose
+/// compiled artifacts cargo reuses across changes of their source.
+fn packaged() -> &'static Path {
+    static PACKAGE_DIR: OnceLock<PathBuf> = OnceLock::new();
+    PACKAGE_DIR.get_or_init(|| {
+        let mut args = vec!["package"];
+        for name in PUBLISHED {
+            args.extend(["-p", name]);
+        }
+        args.extend(["--allow-dirty", "--no-verify"]);
+        cargo_in(Path::new(env!("CARGO_MANIFEST_DIR")), &args);
+        target_dir().join("package")
+    })
+}
+
+/// [`PUBLISHED`] unpacked into a fresh `dir`, as a registry would unpack them; each file's
+/// time is the time of unpacking (`cargo package` stamps them all with one fixed time, and
+/// cargo would take a changed file for unchanged). Returns each crate's directory by name.
+fn unpack(dir: &Path) -> impl Fn(&str) -> PathBuf + use<> {
+    let version = mpc_codegen::vendor::RUNTIME_VERSION;
+    let _ = std::fs::remove_dir_all(dir);
+    std::fs::create_dir_all(dir).unwrap();
+    for name in PUBLISHED {
+        let krate = packaged().join(format!("{name}-{version}.crate"));
+        let out = Command::new("tar")
+            .arg("xzmf")
+            .arg(&krate)
+            .arg("-C")
+            .arg(dir)
+            .output()
+            .expect("tar runs");
+        assert!(out.status.success(), "{}: {}", krate.display(), text(&out));
+        assert!(
+            dir.join(format!("{name}-{version}/Cargo.toml")).is_file(),
+            "{name} not packaged"
+        );
+    }
+    let dir = dir.to_path_buf();
+    move |name| dir.join(format!("{name}-{version}"))
+}
+
+/// `--config` arguments that replace the registry's crates of [`PUBLISHED`] by the unpacked
+/// ones.
+fn patches(unpacked: &impl Fn(&str) -> PathBuf) -> Vec<String> {
+    PUBLISHED
+        .iter()
+        .filter(|name| **name != "mpcc")
+        .flat_map(|name| {
+            let path = unpacked(name);
+            [
+                "--config".to_string(),
+                format!("patch.crates-io.{name}.path={:?}", path.to_str().unwrap()),
+            ]
+        })
+        .collect()
+}
+
 const MODEL: &str = include_str!("../models/paper_pointmass.mpc");
 
-#[test]
-fn mpcc_works_from_an_empty_directory() {
-    let dir = scratch("anywhere");
+/// `bin` (an `mpcc` executable) run from an empty directory: `check`, `build` and `sim` of
+/// the hover, whose solver it checks against the model it was built from (both embedded),
+/// with its log and plots (in the embedded font) written there.
+fn works_anywhere(bin: &Path, name: &str) {
+    let dir = scratch(name);
+    let mpcc = |args: &[&str]| {
+        let out = Command::new(bin)
+            .args(args)
+            .current_dir(&dir)
+            .output()
+            .expect("the mpcc binary runs");
+        let shown = text(&out);
+        assert!(out.status.success(), "mpcc {args:?}: {shown}");
+        shown
+    };
     std::fs::write(dir.join("pointmass.mpc"), MODEL).unwrap();
+    let out = mpcc(&["check", "pointmass.mpc"]);
+    assert!(out.contains("paper_pointmass"), "{out}");
 
-    let out = mpcc_in(&dir, &["check", "pointmass.mpc"]);
-    assert!(out.status.success(), "{}", text(&out));
-    assert!(text(&out).contains("paper_pointmass"), "{}", text(&out));
-
-    let out = mpcc_in(&dir, &["build", "pointmass.mpc", "-o", "solver"]);
-    assert!(out.status.success(), "{}", text(&out));
+    let out = mpcc(&["build", "pointmass.mpc", "-o", "solver"]);
     for f in ["Cargo.toml", "src/lib.rs", "include/paper_pointmass.h"] {
-        assert!(dir.join("solver").join(f).is_file(), "{f}: {}", text(&out));
+        assert!(dir.join("solver").join(f).is_file(), "{f}: {out}");
     }
     let toml = std::fs::read_to_string(dir.join("solver/Cargo.toml")).unwrap();
     assert!(
         toml.contains("mpc-runtime = { version = ") && !toml.contains("path ="),
         "{toml}"
     );
+    mpcc(&[
+        "build",
+        "pointmass.mpc",
+        "--vendor-runtime",
+        "-o",
+        "vendored",
+    ]);
+    assert!(dir.join("vendored/vendor/mpc-runtime/src/lib.rs").is_file());
 
-    // The simulator checks its solver against the model it was built from (both embedded)
-    // and writes its log and plots (with the embedded font) here.
-    let out = mpcc_in(&dir, &["sim", "--mission", "hover", "--out", "sim-out"]);
-    let shown = text(&out);
-    assert!(out.status.success(), "{shown}");
-    assert!(shown.contains("identical to the crate linked"), "{shown}");
-    assert!(shown.contains("1 of 1 trials succeeded"), "{shown}");
+    let out = mpcc(&["sim", "--mission", "hover", "--out", "sim-out"]);
+    assert!(out.contains("identical to the solver linked"), "{out}");
+    assert!(out.contains("1 of 1 trials succeeded"), "{out}");
     let pngs = std::fs::read_dir(dir.join("sim-out"))
         .unwrap()
         .filter(|e| {
@@ -107,8 +193,42 @@ fn mpcc_works_from_an_empty_directory() {
                 .is_ok_and(|e| e.path().extension().is_some_and(|x| x == "png"))
         })
         .count();
-    assert!(pngs > 0, "no plots in sim-out: {shown}");
+    assert!(pngs > 0, "no plots in sim-out: {out}");
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn mpcc_works_from_an_empty_directory() {
+    works_anywhere(Path::new(env!("CARGO_BIN_EXE_mpcc")), "anywhere");
+}
+
+/// `cargo install` of the packaged `mpcc` with only the packaged crates, as a user without
+/// this repository installs it (`--debug`: the same code, compiled faster). The packaged
+/// sources are deleted before the installed binary runs, so it reads nothing of them.
+#[test]
+fn cargo_install_from_the_packaged_crates_gives_an_mpcc_that_works_anywhere() {
+    // Outside the repository: cargo would take a package under it for a workspace member.
+    let sources = scratch("install-sources");
+    let unpacked = unpack(&sources);
+    let root = scratch("installed");
+    let krate = unpacked("mpcc");
+    let mut args = vec![
+        "install".to_string(),
+        "--debug".to_string(),
+        "--path".to_string(),
+        krate.to_str().unwrap().to_string(),
+        "--root".to_string(),
+        root.to_str().unwrap().to_string(),
+    ];
+    args.extend(patches(&unpacked));
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let installed = cargo_in(&root, &args);
+    assert!(installed.contains("Installed package `mpcc"), "{installed}");
+    std::fs::remove_dir_all(&sources).unwrap();
+    assert!(!krate.exists());
+
+    works_anywhere(&root.join("bin/mpcc"), "installed-run");
+    let _ = std::fs::remove_dir_all(&root);
 }
 
 #[test]
@@ -172,11 +292,9 @@ fn a_vendored_crate_builds_offline_anywhere_and_for_bare_metal() {
 
 #[test]
 fn a_versioned_crate_builds_against_the_packaged_runtime() {
-    // `cargo package` packs and verifies mpc-runtime (its build builds the packed crate).
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    cargo_in(root, &["package", "-p", "mpc-runtime", "--allow-dirty"]);
     let version = mpc_codegen::vendor::RUNTIME_VERSION;
-    let packed = target_dir().join(format!("package/mpc-runtime-{version}"));
+    let unpacked = unpack(&target_dir().join("unpacked-versioned"));
+    let packed = unpacked("mpc-runtime");
     for f in [
         "Cargo.toml",
         "src/lib.rs",
@@ -206,47 +324,15 @@ fn a_versioned_crate_builds_against_the_packaged_runtime() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// What a user without this repository has: the three library crates as `cargo package`
-/// packs them (what a registry would serve). A fresh project generates a solver from its own
-/// `.mpc` file in `build.rs` with the packaged generator, builds it against the packaged
-/// runtime and runs it; its first control is the one of this repository's checked-in crate
-/// generated from the same model (`generated/paper_pointmass`).
+/// What a user without this repository has: the library crates as `cargo package` packs
+/// them (what a registry would serve). A fresh project generates a solver from its own `.mpc`
+/// file in `build.rs` with the packaged generator, builds it against the packaged runtime and
+/// runs it; its first control is the one of the same model's solver in `mpc-models` (the
+/// code of `generated/paper_pointmass`).
 #[test]
 fn a_fresh_project_generates_builds_and_runs_a_solver_from_the_packaged_crates() {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    cargo_in(
-        root,
-        &[
-            "package",
-            "-p",
-            "mpc-dsl",
-            "-p",
-            "mpc-runtime",
-            "-p",
-            "mpc-codegen",
-            "--allow-dirty",
-            "--no-verify",
-        ],
-    );
-    // Unpacked here, as a registry would unpack them. Not `cargo package`'s own verification:
-    // it builds the packed crates as registry crates of version 0.1.0, whose compiled
-    // artifacts cargo reuses across changes of their source.
     let version = mpc_codegen::vendor::RUNTIME_VERSION;
-    let unpacked = target_dir().join("unpacked");
-    let _ = std::fs::remove_dir_all(&unpacked);
-    std::fs::create_dir_all(&unpacked).unwrap();
-    for name in ["mpc-dsl", "mpc-runtime", "mpc-codegen"] {
-        let krate = target_dir().join(format!("package/{name}-{version}.crate"));
-        let out = Command::new("tar")
-            .arg("xzf")
-            .arg(&krate)
-            .arg("-C")
-            .arg(&unpacked)
-            .output()
-            .expect("tar runs");
-        assert!(out.status.success(), "{}: {}", krate.display(), text(&out));
-    }
-    let packed = |name: &str| unpacked.join(format!("{name}-{version}"));
+    let unpacked = unpack(&target_dir().join("unpacked-fresh"));
     let dir = scratch("fresh");
     std::fs::create_dir_all(dir.join("src")).unwrap();
     std::fs::write(dir.join("pointmass.mpc"), MODEL).unwrap();
@@ -256,8 +342,7 @@ fn a_fresh_project_generates_builds_and_runs_a_solver_from_the_packaged_crates()
          [build-dependencies]\nmpc-codegen = \"{version}\"\n\n[patch.crates-io]\n"
     );
     for name in ["mpc-dsl", "mpc-runtime", "mpc-codegen"] {
-        let path = packed(name);
-        assert!(path.join("Cargo.toml").is_file(), "{name} not packaged");
+        let path = unpacked(name);
         toml += &format!("{name} = {{ path = {:?} }}\n", path.to_str().unwrap());
     }
     std::fs::write(dir.join("Cargo.toml"), toml).unwrap();
@@ -270,14 +355,14 @@ fn a_fresh_project_generates_builds_and_runs_a_solver_from_the_packaged_crates()
     std::fs::write(dir.join("src/main.rs"), FRESH_MAIN).unwrap();
     let ran = cargo_in(&dir, &["run", "-q"]);
 
-    let mut s = paper_pointmass::Solver::new();
+    let mut s = mpc_models::paper_pointmass::Solver::new();
     s.prepare();
     s.set_x0(&FRESH_X0).unwrap();
     let info = s.feedback();
     let want = format!("{:?} {:?}", info.status, s.u0());
     assert!(
         ran.contains(&want),
-        "fresh project: {ran}\nthis repository's crate: {want}"
+        "fresh project: {ran}\nmpc-models' solver: {want}"
     );
     assert!(ran.contains("Ok ["), "{ran}");
     let _ = std::fs::remove_dir_all(&dir);
