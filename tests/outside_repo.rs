@@ -3,9 +3,9 @@
 //! crates (whose sources are then deleted: models, templates and the runtime's source are
 //! embedded), a generated crate with the runtime vendored built offline for the host and for
 //! a bare-metal target and again after being moved, a crate with the default versioned
-//! dependency built against `mpc-runtime` as `cargo package` packs it, and a fresh project
-//! that has only the packed library crates generates a solver in its `build.rs`, builds and
-//! runs it.
+//! dependency built against `mpc-runtime` as `cargo package` packs it (host and bare metal),
+//! and a fresh project that has only the packed library crates generates a solver in its
+//! `build.rs`, builds and runs it.
 //!
 //! The builds are offline: the dependencies are in cargo's cache from this workspace's build.
 
@@ -321,6 +321,17 @@ fn a_versioned_crate_builds_against_the_packaged_runtime() {
     );
     let built = cargo_in(&krate, &["build", "--config", &patch]);
     assert!(built.contains("Compiling paper_pointmass"), "{built}");
+    let bare = cargo_in(
+        &krate,
+        &[
+            "build",
+            "--target",
+            "thumbv7em-none-eabihf",
+            "--config",
+            &patch,
+        ],
+    );
+    assert!(bare.contains("Compiling paper_pointmass"), "{bare}");
     let _ = std::fs::remove_dir_all(&dir);
 }
 
