@@ -1,13 +1,14 @@
 //! The bare-metal C proof (`tests/embedded-c/`): generates the f32 QR-bench A solver with
-//! `mpcc build --staticlib` (as `generated/quadrotor_rates_f32`), builds its static library
-//! for `thumbv7em-none-eabihf` (no `std`, the crate's panic handler, the Rust firmware's
-//! release profile), builds the C firmware with arm-none-eabi-gcc and the crate's Makefile
-//! fragment (no Rust in that build), and flies both it and the Rust firmware
-//! (`tests/embedded/`) in qemu on the emulated Cortex-M4F (`mps2-an386`, `-icount shift=0`).
-//! The C firmware must fly every step Ok with the Rust firmware's QP iterations and end in
-//! the same final state, bit for bit; flash, RAM and instructions per step of both are
-//! printed side by side (`docs/embedded-c.md`). Needs qemu-system-arm, arm-none-eabi-gcc
-//! (with binutils) and make: without them the test fails, it never skips.
+//! `mpcc build --staticlib` (as `generated/quadrotor_rates_f32`), builds its bare-metal
+//! static library for `thumbv7em-none-eabihf` (the crate's `bare-metal/` library crate, with
+//! its firmware profile, through the crate's Makefile fragment), builds the C firmware with
+//! arm-none-eabi-gcc and that fragment (no Rust in that build), and flies both it and the
+//! Rust firmware (`tests/embedded/`) in qemu on the emulated Cortex-M4F (`mps2-an386`,
+//! `-icount shift=0`). The C firmware must fly every step Ok with the Rust firmware's QP
+//! iterations, end in the same final state, bit for bit, and meet the flash (64 KiB) and RAM
+//! (32 KiB) targets; flash, RAM and instructions per step of both are printed side by side
+//! (`docs/embedded-c.md`). Needs qemu-system-arm, arm-none-eabi-gcc (with binutils) and
+//! make: without them the test fails, it never skips.
 #![cfg(unix)]
 
 use std::path::{Path, PathBuf};
@@ -23,6 +24,10 @@ const NAME: &str = "quadrotor_rates_f32";
 const QEMU: &str = "qemu-system-arm";
 const QEMU_TIMEOUT: Duration = Duration::from_secs(120);
 const STEPS: usize = 100;
+/// The flash target of the firmware (bytes of text + data).
+const FLASH_TARGET: u32 = 64 * 1024;
+/// The RAM target of the firmware (static data plus the deepest stack).
+const RAM_TARGET: u32 = 32 * 1024;
 
 fn repo() -> &'static Path {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -34,7 +39,11 @@ fn tmpdir() -> &'static Path {
 
 /// A cargo command for the thumb target, free of the host build's flags.
 fn thumb_cargo() -> Command {
-    let mut cmd = Command::new(env!("CARGO"));
+    without_host_flags(Command::new(env!("CARGO")))
+}
+
+/// `cmd` (cargo, or make running cargo) without the host build's flags.
+fn without_host_flags(mut cmd: Command) -> Command {
     cmd.env_remove("RUSTFLAGS")
         .env_remove("CARGO_ENCODED_RUSTFLAGS")
         .env_remove("CARGO_BUILD_RUSTFLAGS")
@@ -59,11 +68,9 @@ fn rust_firmware() -> PathBuf {
     target_dir.join(TARGET).join("release/embedded-qr-bench")
 }
 
-/// Generates the solver crate with its glue into `tmp` and builds its static library for
-/// the thumb target with the Rust firmware's profile (`tests/embedded/Cargo.toml`: "s",
-/// opt-level 2 for the generated crate, fat LTO, one codegen unit, abort on panic) and its
-/// dependency versions (its `Cargo.lock`). Returns the crate directory.
-fn solver_staticlib(tmp: &Path) -> PathBuf {
+/// Generates the solver crate with its glue into `tmp`, with the Rust firmware's dependency
+/// versions (its `Cargo.lock`) for the bare-metal library crate. Returns the crate directory.
+fn solver_crate(tmp: &Path) -> PathBuf {
     let crate_dir = tmp.join(NAME);
     let out_dir = crate_dir.to_str().expect("UTF-8 temporary directory");
     let (code, stdout, stderr) = common::mpcc(&[
@@ -86,30 +93,13 @@ fn solver_staticlib(tmp: &Path) -> PathBuf {
     assert_eq!(code, Some(0), "mpcc build failed:\n{stdout}\n{stderr}");
     std::fs::copy(
         repo().join("tests/embedded/Cargo.lock"),
-        crate_dir.join("Cargo.lock"),
+        crate_dir.join("bare-metal/Cargo.lock"),
     )
     .expect("copy the Rust firmware's Cargo.lock");
     // The crate's target/ is a directory kept between runs (and shared with tests/c_glue.rs).
     let shared = tmpdir().join("generated-staticlibs");
     std::fs::create_dir_all(&shared).expect("create the shared target directory");
     std::os::unix::fs::symlink(&shared, crate_dir.join("target")).expect("link target/");
-    let profile = [
-        "profile.release.opt-level=\"s\"",
-        "profile.release.package.quadrotor_rates_f32.opt-level=2",
-        "profile.release.lto=true",
-        "profile.release.codegen-units=1",
-        "profile.release.panic=\"abort\"",
-        "profile.release.debug=false",
-    ];
-    let mut cmd = thumb_cargo();
-    cmd.args(["build", "--release", "--target", TARGET])
-        .args(["--no-default-features", "--features", "panic-handler"])
-        .arg("--manifest-path")
-        .arg(crate_dir.join("Cargo.toml"));
-    for p in profile {
-        cmd.args(["--config", p]);
-    }
-    run(&mut cmd, "building the solver's static library");
     crate_dir
 }
 
@@ -244,16 +234,18 @@ fn c_firmware_flies_qr_bench_like_the_rust_firmware() {
     let rust_elf = rust_firmware();
     let rust = parse(&run_qemu(&rust_elf), "Rust firmware");
 
-    let crate_dir = solver_staticlib(&tmp.0);
-    // The C build: make and arm-none-eabi-gcc only, the solver's memory as large as the
-    // Rust firmware's `Solver`.
+    let crate_dir = solver_crate(&tmp.0);
+    // The library through the fragment's rule (`<name>-staticlib` always asks cargo: the
+    // target directory is kept between runs), then the C build: make and arm-none-eabi-gcc
+    // only, the solver's memory as large as the Rust firmware's `Solver`.
     run(
-        Command::new("make")
+        without_host_flags(Command::new("make"))
             .current_dir(repo().join("tests/embedded-c"))
             .arg(format!("CRATE={}", crate_dir.display()))
             .arg(format!("OUT={}", tmp.0.display()))
-            .arg(format!("SOLVER_BYTES={}", rust.solver_bytes)),
-        "building the C firmware",
+            .arg(format!("SOLVER_BYTES={}", rust.solver_bytes))
+            .args([&format!("{NAME}-staticlib"), "firmware"]),
+        "building the static library and the C firmware",
     );
     let c_elf = tmp.0.join("embedded-c-qr-bench");
     let c_out = run_qemu(&c_elf);
@@ -270,6 +262,15 @@ fn c_firmware_flies_qr_bench_like_the_rust_firmware() {
     assert_eq!(c.x_final_bits, rust.x_final_bits, "final state (f32 bits)");
 
     let (fc, fr) = (flash(&c_elf), flash(&rust_elf));
+    assert!(
+        fc <= FLASH_TARGET,
+        "C firmware flash {fc} B > {FLASH_TARGET} B"
+    );
+    assert!(
+        c.ram[2] <= RAM_TARGET,
+        "C firmware RAM {} B > {RAM_TARGET} B",
+        c.ram[2]
+    );
     println!("QR-bench A, f32, mps2-an386 (Cortex-M4F), 100 steps: C firmware | Rust firmware");
     println!("flash B:                    {fc} | {fr}");
     println!(

@@ -1,6 +1,8 @@
 //! Build glue for C and C++ projects, written next to a `--staticlib` crate with a C ABI: a
-//! Makefile fragment `<name>.mk` (host and bare metal) and a pkg-config file `<name>.pc`
-//! (host). Why these and not a CMake package: `docs/codegen.md`, "Build glue for C".
+//! Makefile fragment `<name>.mk` (host and bare metal), a pkg-config file `<name>.pc`
+//! (host) and the bare-metal library crate `bare-metal/` (the firmware profile). Why these
+//! and not a CMake package, and why a crate of its own: `docs/codegen.md`, "Build glue for
+//! C".
 
 use std::path::PathBuf;
 
@@ -10,8 +12,8 @@ use crate::Options;
 /// them (`cc` adds `-lc` and `-lgcc_s` itself); bare metal needs none.
 pub const HOST_LIBS: &str = "-lpthread -ldl -lm";
 
-/// The cargo arguments of a bare-metal build: no `std`, the crate's own panic handler.
-pub const BARE_METAL_FEATURES: &str = "--no-default-features --features panic-handler";
+/// The directory (in the generated crate) of the bare-metal library crate.
+pub const BARE_METAL_DIR: &str = "bare-metal";
 
 /// The glue files of crate `name` (paths relative to the crate), none unless the crate is a
 /// staticlib with the C ABI.
@@ -25,12 +27,84 @@ pub(crate) fn files(name: &str, stamp: &str, opts: &Options) -> Vec<(PathBuf, St
             PathBuf::from(format!("{name}.pc")),
             pkg_config(name, stamp, opts.scalar.c()),
         ),
+        (
+            PathBuf::from(format!("{BARE_METAL_DIR}/Cargo.toml")),
+            bare_metal_cargo_toml(name, stamp),
+        ),
+        (
+            PathBuf::from(format!("{BARE_METAL_DIR}/src/lib.rs")),
+            bare_metal_lib(name, stamp),
+        ),
     ]
+}
+
+/// The manifest of the bare-metal library crate: a staticlib that re-exports crate `name`
+/// (no `std`, its panic handler) and carries the firmware profile. The crate is the LTO
+/// root, so the whole library is optimized for size ("s") after LTO, while the solver crate
+/// (where the runtime's generic code is instantiated) and the runtime are optimized at 2
+/// before it: the Rust firmware's split. Built as the generated crate itself, the solver
+/// crate would be the root and its opt-level would apply to everything.
+fn bare_metal_cargo_toml(name: &str, stamp: &str) -> String {
+    format!(
+        "# {stamp}
+# The static library lib{name}_bare_metal.a for bare-metal C firmware:
+# the C ABI of `{name}` without `std`, with its panic handler, built with the
+# profile below. Build it with
+#   cargo build --release --manifest-path <this directory>/Cargo.toml --target <target>
+[package]
+name = \"{name}_bare_metal\"
+version = \"0.1.0\"
+edition = \"2024\"
+rust-version = \"1.95\"
+license = \"MIT OR Apache-2.0\"
+description = \"The static library of mpcc-generated `{name}` for bare metal\"
+publish = false
+
+# Standalone (own workspace), so that the profile below is the one cargo uses.
+[workspace]
+
+[lib]
+crate-type = [\"staticlib\"]
+
+[dependencies]
+{name} = {{ path = \"..\", default-features = false, features = [\"panic-handler\"] }}
+
+# This crate is the LTO root: \"s\" applies to the whole library after (fat) LTO; the
+# solver crate, where the runtime's generic code is compiled, and the runtime are
+# optimized at 2 before it (the bare-metal C firmware test measures the trade-off).
+[profile.release]
+opt-level = \"s\"
+lto = true
+codegen-units = 1
+panic = \"abort\"
+debug = false
+
+[profile.release.package.{name}]
+opt-level = 2
+
+[profile.release.package.mpc-runtime]
+opt-level = 2
+"
+    )
+}
+
+/// The bare-metal library crate's source: the solver crate re-exported, which links its C
+/// functions and panic handler into the archive.
+fn bare_metal_lib(name: &str, stamp: &str) -> String {
+    format!(
+        "//! {stamp}
+//!
+//! The C ABI of `{name}` as a static library for bare-metal firmware (see `Cargo.toml`).
+#![no_std]
+
+pub use {name}::*;
+"
+    )
 }
 
 /// The Makefile fragment: `<NAME>_CFLAGS`, `<NAME>_LIBS`, `<NAME>_LIB` and a rule that runs
 /// cargo for a missing archive. `<NAME>_TARGET` (set before the `include`) selects a
-/// cross build (bare metal: no system libraries).
+/// cross build: the bare-metal library crate, no system libraries.
 fn makefile(name: &str, stamp: &str) -> String {
     let v = name.to_uppercase();
     format!(
@@ -45,7 +119,8 @@ fn makefile(name: &str, stamp: &str) -> String {
 # The static library is built by cargo; the rule below runs it when the archive is missing
 # (`make {name}-staticlib` always asks cargo, which rebuilds only what changed). For bare
 # metal set {v}_TARGET to the Rust target (e.g. thumbv7em-none-eabihf) before the include:
-# the library is then built without `std`, with the crate's panic handler, and links no
+# the library is then lib{name}_bare_metal.a of the crate in {BARE_METAL_DIR}/ (without `std`,
+# with the crate's panic handler, the firmware profile of its Cargo.toml) and links no
 # system libraries. Override {v}_TARGET_DIR to share a cargo target directory.
 
 {v}_DIR := $(patsubst %/,%,$(dir $(lastword $(MAKEFILE_LIST))))
@@ -57,16 +132,20 @@ fn makefile(name: &str, stamp: &str) -> String {
 CARGO ?= cargo
 
 ifeq ($(strip $({v}_TARGET)),)
+{v}_MANIFEST := $({v}_DIR)/Cargo.toml
 {v}_LIBDIR := $({v}_TARGET_DIR)/$({v}_PROFILE)
+{v}_LIBNAME := {name}
 {v}_CARGO_FLAGS ?=
 {v}_SYSLIBS ?= {HOST_LIBS}
 else
+{v}_MANIFEST := $({v}_DIR)/{BARE_METAL_DIR}/Cargo.toml
 {v}_LIBDIR := $({v}_TARGET_DIR)/$({v}_TARGET)/$({v}_PROFILE)
-{v}_CARGO_FLAGS ?= --target $({v}_TARGET) {BARE_METAL_FEATURES}
+{v}_LIBNAME := {name}_bare_metal
+{v}_CARGO_FLAGS ?= --target $({v}_TARGET)
 {v}_SYSLIBS ?=
 endif
 
-{v}_LIB := $({v}_LIBDIR)/lib{name}.a
+{v}_LIB := $({v}_LIBDIR)/lib$({v}_LIBNAME).a
 {v}_CFLAGS := -I$({v}_DIR)/include
 {v}_LIBS := $({v}_LIB) $({v}_SYSLIBS)
 # cargo's profile `dev` builds into `debug/`.
@@ -74,7 +153,7 @@ endif
 
 .PHONY: {name}-staticlib
 $({v}_LIB) {name}-staticlib:
-\t$(CARGO) build --profile $({v}_CARGO_PROFILE) --manifest-path $({v}_DIR)/Cargo.toml \\
+\t$(CARGO) build --profile $({v}_CARGO_PROFILE) --manifest-path $({v}_MANIFEST) \\
 \t\t--target-dir $({v}_TARGET_DIR) $({v}_CARGO_FLAGS)
 
 .DEFAULT_GOAL := $({v}_DEFAULT_GOAL)
@@ -113,11 +192,11 @@ pub fn usage(dir: &str, name: &str) -> String {
          cc main.c -I{dir}/include {dir}/target/release/lib{name}.a {HOST_LIBS}\n  \
          (or GNU make: include {dir}/{name}.mk, then $({v}_CFLAGS) ... $({v}_LIBS); \
          or pkg-config: PKG_CONFIG_PATH={dir} pkg-config --cflags --libs {name})\n\
-         bare metal (e.g. Cortex-M4F; no system libraries):\n  \
-         cargo build --release --manifest-path {dir}/Cargo.toml --target thumbv7em-none-eabihf \
-         {BARE_METAL_FEATURES}\n  \
+         bare metal (e.g. Cortex-M4F; no system libraries; the firmware profile):\n  \
+         cargo build --release --manifest-path {dir}/{BARE_METAL_DIR}/Cargo.toml \
+         --target thumbv7em-none-eabihf\n  \
          arm-none-eabi-gcc ... main.c -I{dir}/include \
-         {dir}/target/thumbv7em-none-eabihf/release/lib{name}.a\n"
+         {dir}/{BARE_METAL_DIR}/target/thumbv7em-none-eabihf/release/lib{name}_bare_metal.a\n"
     )
 }
 
@@ -132,9 +211,40 @@ mod tests {
         o.staticlib = true;
         let f = files("m", "s", &o);
         let names: Vec<_> = f.iter().map(|(p, _)| p.display().to_string()).collect();
-        assert_eq!(names, ["m.mk", "m.pc"]);
+        assert_eq!(
+            names,
+            [
+                "m.mk",
+                "m.pc",
+                "bare-metal/Cargo.toml",
+                "bare-metal/src/lib.rs"
+            ]
+        );
         o.c_abi = false;
         assert!(files("m", "s", &o).is_empty());
+    }
+
+    #[test]
+    fn the_fragment_builds_the_bare_metal_crate_it_names() {
+        let mk = makefile("m", "s");
+        let manifest = bare_metal_cargo_toml("m", "s");
+        // The archive cargo writes is lib<package name>.a: the name the fragment links.
+        assert!(
+            manifest.contains("\n[package]\nname = \"m_bare_metal\"\n"),
+            "{manifest}"
+        );
+        assert!(mk.contains("M_LIBNAME := m_bare_metal\n"), "{mk}");
+        assert!(
+            mk.contains("M_MANIFEST := $(M_DIR)/bare-metal/Cargo.toml\n"),
+            "{mk}"
+        );
+        // A staticlib of its own workspace, so that its profile is the one cargo uses.
+        assert!(manifest.contains("\n[workspace]\n"), "{manifest}");
+        assert!(
+            manifest.contains("crate-type = [\"staticlib\"]"),
+            "{manifest}"
+        );
+        assert!(bare_metal_lib("m", "s").contains("pub use m::*;"));
     }
 
     #[test]
