@@ -215,7 +215,7 @@ fn main() -> ! {
     let err = libm::sqrtf(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
     let ipt = INSNS_PER_TICK;
     let steps = STEPS as u32;
-    // No float formatting (core::fmt's took 24 KB of flash; README.md here): the mean as
+    // No float formatting (core::fmt's is large; README.md here has its size): the mean as
     // hundredths, the error in micrometres, the final state as the bits of each f32 (exact).
     hprintln!(
         "steps={} all_ok={} qp_iters={} (mean x100: {})",
