@@ -6,117 +6,71 @@
 
 use mpc_codegen::{Builder, QpMethod, QpOptions, Scalar};
 
-/// A solver to generate: module name, model file (without `.mpc`), variant, f32, exact
-/// Hessian, QP method.
-type Spec = (
-    &'static str,
-    &'static str,
-    Option<&'static str>,
-    bool,
-    bool,
-    Option<QpMethod>,
-);
-
-/// The options of each `generated/` crate of the same name (`generated/README.md`).
-const SOLVERS: [Spec; 10] = [
-    (
-        "paper_pointmass",
-        "paper_pointmass",
-        None,
-        false,
-        false,
-        None,
-    ),
-    (
-        "quadrotor_probe",
-        "quadrotor_probe",
-        None,
-        false,
-        false,
-        None,
-    ),
-    (
-        "quadrotor_rates",
-        "quadrotor_rates",
-        None,
-        false,
-        false,
-        None,
-    ),
-    (
-        "quadrotor_rates_a",
-        "quadrotor_rates",
-        Some("A"),
-        false,
-        false,
-        None,
-    ),
+/// Module, model file (without `.mpc`), and the options of the `generated/` crate of the same
+/// name as its `mpcc build` command in `generated/README.md` gives them.
+const SOLVERS: [(&str, &str, &str); 10] = [
+    ("paper_pointmass", "paper_pointmass", ""),
+    ("quadrotor_probe", "quadrotor_probe", ""),
+    ("quadrotor_rates", "quadrotor_rates", ""),
+    ("quadrotor_rates_a", "quadrotor_rates", "--variant A"),
     (
         "quadrotor_rates_a_exact",
         "quadrotor_rates",
-        Some("A"),
-        false,
-        true,
-        Some(QpMethod::Riccati),
+        "--variant A --exact-hessian --qp-method riccati",
     ),
     (
         "quadrotor_rates_b_exact",
         "quadrotor_rates",
-        None,
-        false,
-        true,
-        Some(QpMethod::Riccati),
+        "--exact-hessian --qp-method riccati",
     ),
     (
         "quadrotor_rates_f32",
         "quadrotor_rates",
-        Some("A"),
-        true,
-        false,
-        Some(QpMethod::Condensed),
+        "--variant A --f32 --qp-method condensed",
     ),
-    (
-        "quadrotor_rates_b_f32",
-        "quadrotor_rates",
-        None,
-        true,
-        false,
-        None,
-    ),
-    (
-        "quadrotor_rates_n40",
-        "quadrotor_rates",
-        Some("N40"),
-        false,
-        false,
-        None,
-    ),
+    ("quadrotor_rates_b_f32", "quadrotor_rates", "--f32"),
+    ("quadrotor_rates_n40", "quadrotor_rates", "--variant N40"),
     (
         "quadrotor_rates_n40_f32",
         "quadrotor_rates",
-        Some("N40"),
-        true,
-        false,
-        None,
+        "--variant N40 --f32",
     ),
 ];
 
+/// The builder for `model.mpc` with `mpcc build`'s flags `flags`.
+fn builder(module: &str, model: &str, flags: &str) -> Builder {
+    let mut b = Builder::new(format!("{model}.mpc")).module(module);
+    let mut flags = flags.split_whitespace();
+    while let Some(flag) = flags.next() {
+        let mut value = || {
+            flags
+                .next()
+                .unwrap_or_else(|| panic!("{flag} needs a value"))
+        };
+        b = match flag {
+            "--variant" => b.variant(value()),
+            "--f32" => b.scalar(Scalar::F32),
+            "--exact-hessian" => b.exact_hessian(true),
+            "--qp-method" => {
+                let method = match value() {
+                    "riccati" => QpMethod::Riccati,
+                    "condensed" => QpMethod::Condensed,
+                    other => panic!("--qp-method {other}: riccati or condensed"),
+                };
+                b.qp(QpOptions {
+                    method: Some(method),
+                    ..QpOptions::default()
+                })
+            }
+            other => panic!("{module}: {other} is not a flag this script knows"),
+        };
+    }
+    b
+}
+
 fn main() {
-    for (module, model, variant, f32, exact, method) in SOLVERS {
-        let mut b = Builder::new(format!("{model}.mpc"))
-            .module(module)
-            .exact_hessian(exact)
-            .qp(QpOptions {
-                method,
-                ..QpOptions::default()
-            });
-        if let Some(v) = variant {
-            b = b.variant(v);
-        }
-        if f32 {
-            b = b.scalar(Scalar::F32);
-        }
-        if let Err(e) = b.build() {
+    for (module, model, flags) in SOLVERS {
+        if let Err(e) = builder(module, model, flags).build() {
             panic!("{model}.mpc, module {module}: {e}");
         }
     }
