@@ -147,7 +147,6 @@ fn prepare(args: &FlyArgs) -> Result<(Link, Pilot), ExitCode> {
         code
     };
     let cfg = pilot_config(args).map_err(|e| fail(&e, ExitCode::from(2)))?;
-    crate::trials::check_solver("nmpc", args.json).map_err(|e| fail(&e, ExitCode::FAILURE))?;
     let link = open(args).map_err(|e| fail(&e, ExitCode::from(2)))?;
     let pilot = Pilot::new(cfg).map_err(|e| fail(&e, ExitCode::from(2)))?;
     Ok((link, pilot))

@@ -12,7 +12,7 @@ use mpc_sim::report;
 use mpc_sim::run::{SimConfig, TrialResult, run_trial};
 
 use crate::SimArgs;
-use crate::trials::{check_solver, fly_all, write_log_and_plots};
+use crate::trials::{fly_all, write_log_and_plots};
 
 /// The mission configuration of `kind` with the command line's `--rally`, `--altitude` and
 /// `--flip-rate` (shared by `mpcc sim` and `mpcc fly`).
@@ -129,10 +129,6 @@ pub(crate) fn run(args: &SimArgs) -> ExitCode {
             return ExitCode::from(2);
         }
     };
-    if let Err(e) = check_solver(controller.name(), args.json) {
-        eprintln!("error: {e}");
-        return ExitCode::FAILURE;
-    }
     let mut base = SimConfig::new(mission_cfg, controller);
     base.seed = args.seed;
     if let Some(m) = args.mass {

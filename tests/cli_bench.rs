@@ -79,13 +79,14 @@ fn converged_sqp_closed_loop_matches_casadi() {
                     .join(anchor),
             );
             let d = max_position_difference(&ours, &theirs);
+            println!("N = {horizon}, {hessian}: {d:.1e} m from CasADi's closed loop");
             // The issue asks for 1e-3 m; the two converged solutions agree far closer.
             assert!(
                 d < 1e-6,
                 "N = {horizon}, {hessian}: {d} m from CasADi's closed loop"
             );
         }
-        // Measured: A 2.65 against 7.77, B 2.54 against 5.88. CasADi's exact-Hessian SQP
+        // Measured: A 2.65 against 7.79, B 2.54 against 5.88. CasADi's exact-Hessian SQP
         // took 2.69 on A (its reference runs, docs/benchmarks.md): the KKT exit and the watchdog's whole Newton
         // steps (from the hover guess, the first step of A converges in 7 QPs instead of 30)
         // bring ours under 3.

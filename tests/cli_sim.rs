@@ -22,7 +22,6 @@ fn default_run_flies_the_flip_and_writes_log_and_plots() {
             "no {phase} row in\n{out}"
         );
     }
-    assert!(err.contains("identical to the solver linked"), "{err}");
     let csv = std::fs::read_to_string(dir.join("flip.csv")).unwrap();
     let mut lines = csv.lines();
     let header = lines.next().unwrap();

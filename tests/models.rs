@@ -52,32 +52,42 @@ fn the_paper_solvers_of_mpc_models_are_the_checked_in_crates() {
     same_solver!(quadrotor_rates_n40_f32);
 }
 
-/// The model texts `mpc-models` embeds are the files of `models/`.
+/// `mpc_models::source` embeds every `.mpc` file of `models/`, and each text parses as the
+/// model its file is named after.
 #[test]
-fn the_embedded_model_texts_are_the_files() {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("models");
-    let read = |f: &str| std::fs::read_to_string(dir.join(f)).unwrap();
+fn every_model_file_is_embedded_and_parses() {
+    use mpc_dsl::Graph;
+    use mpc_dsl::lang::{ParseOptions, parse};
     use mpc_models::source as s;
-    for (file, text) in [
-        ("paper_pointmass.mpc", s::PAPER_POINTMASS),
-        ("quadrotor_rates.mpc", s::QUADROTOR_RATES),
-        ("quadrotor_probe.mpc", s::QUADROTOR_PROBE),
-        ("cartpole.mpc", s::CARTPOLE),
-        ("bicycle.mpc", s::BICYCLE),
-        ("planar_quadrotor.mpc", s::PLANAR_QUADROTOR),
-        ("stiff_actuator.mpc", s::STIFF_ACTUATOR),
-    ] {
-        assert_eq!(read(file), text, "{file}");
+    let embedded = [
+        ("paper_pointmass", s::PAPER_POINTMASS),
+        ("quadrotor_rates", s::QUADROTOR_RATES),
+        ("quadrotor_probe", s::QUADROTOR_PROBE),
+        ("cartpole", s::CARTPOLE),
+        ("bicycle", s::BICYCLE),
+        ("planar_quadrotor", s::PLANAR_QUADROTOR),
+        ("stiff_actuator", s::STIFF_ACTUATOR),
+    ];
+    for (name, text) in embedded {
+        let g = Graph::new();
+        let parsed = parse(&g, text, &ParseOptions::default())
+            .unwrap_or_else(|d| panic!("{}", d.render(name, text)));
+        assert_eq!(parsed.ocp.name, name);
     }
-    let files = std::fs::read_dir(&dir)
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("models");
+    let mut files: Vec<String> = std::fs::read_dir(&dir)
         .unwrap()
-        .filter(|e| {
-            e.as_ref()
-                .is_ok_and(|e| e.path().extension().is_some_and(|x| x == "mpc"))
+        .filter_map(|e| {
+            let path = e.ok()?.path();
+            let stem = path.file_stem()?.to_str()?.to_string();
+            path.extension().is_some_and(|x| x == "mpc").then_some(stem)
         })
-        .count();
+        .collect();
+    files.sort();
+    let mut names: Vec<String> = embedded.iter().map(|(n, _)| n.to_string()).collect();
+    names.sort();
     assert_eq!(
-        files, 7,
+        files, names,
         "a model file of models/ is not in mpc_models::source"
     );
 }

@@ -146,9 +146,20 @@ fn patches(unpacked: &impl Fn(&str) -> PathBuf) -> Vec<String> {
 
 const MODEL: &str = include_str!("../models/paper_pointmass.mpc");
 
+/// Every `.rs` file under `dir`, recursively.
+fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
+    for entry in std::fs::read_dir(dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.is_dir() {
+            rust_files(&path, out);
+        } else if path.extension().is_some_and(|e| e == "rs") {
+            out.push(path);
+        }
+    }
+}
+
 /// `bin` (an `mpcc` executable) run from an empty directory: `check`, `build` and `sim` of
-/// the hover, whose solver it checks against the model it was built from (both embedded),
-/// with its log and plots (in the embedded font) written there.
+/// the hover, with its log and plots (in the embedded font) written there.
 fn works_anywhere(bin: &Path, name: &str) {
     let dir = scratch(name);
     let mpcc = |args: &[&str]| {
@@ -184,7 +195,6 @@ fn works_anywhere(bin: &Path, name: &str) {
     assert!(dir.join("vendored/vendor/mpc-runtime/src/lib.rs").is_file());
 
     let out = mpcc(&["sim", "--mission", "hover", "--out", "sim-out"]);
-    assert!(out.contains("identical to the solver linked"), "{out}");
     assert!(out.contains("1 of 1 trials succeeded"), "{out}");
     let pngs = std::fs::read_dir(dir.join("sim-out"))
         .unwrap()
@@ -231,6 +241,35 @@ fn cargo_install_from_the_packaged_crates_gives_an_mpcc_that_works_anywhere() {
     let _ = std::fs::remove_dir_all(&root);
 }
 
+/// The vendored `Cargo.toml` declares the runtime's dependencies as the workspace does (a
+/// test of `mpc-codegen`'s `vendor` module, here because it reads the workspace's manifests,
+/// which the packed `mpc-codegen` does not carry).
+#[test]
+fn vendored_dependencies_are_the_runtimes() {
+    use mpc_codegen::vendor::{
+        RUNTIME_DEPENDENCIES, RUNTIME_FILES, RUNTIME_VERSION, runtime_cargo_toml,
+    };
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let workspace = std::fs::read_to_string(root.join("Cargo.toml")).unwrap();
+    let runtime = std::fs::read_to_string(root.join("runtime/Cargo.toml")).unwrap();
+    let section = runtime
+        .split("\n[dependencies]\n")
+        .nth(1)
+        .and_then(|s| s.split("\n[").next())
+        .expect("runtime/Cargo.toml has [dependencies]");
+    let mut names: Vec<&str> = section
+        .lines()
+        .filter_map(|l| l.strip_suffix(".workspace = true"))
+        .collect();
+    names.sort_unstable();
+    assert_eq!(names, ["libm", "nalgebra"], "{section}");
+    for line in RUNTIME_DEPENDENCIES.lines() {
+        assert!(workspace.lines().any(|l| l == line), "{line}");
+    }
+    assert!(runtime_cargo_toml().contains(&format!("version = \"{RUNTIME_VERSION}\"")));
+    assert!(RUNTIME_FILES.iter().any(|(p, _)| *p == "src/lib.rs"));
+}
+
 #[test]
 fn a_vendored_crate_builds_offline_anywhere_and_for_bare_metal() {
     let first = scratch("vendored");
@@ -257,13 +296,18 @@ fn a_vendored_crate_builds_offline_anywhere_and_for_bare_metal() {
     for f in ["Cargo.toml", "src/lib.rs", "LICENSE-MIT", "LICENSE-APACHE"] {
         assert!(vendored.join(f).is_file(), "vendor/mpc-runtime/{f} missing");
     }
-    // The vendored copy is the runtime's source as it is in this checkout.
+    // The files written are the runtime's source as it is in this checkout, all of it.
     let runtime = Path::new(env!("CARGO_MANIFEST_DIR")).join("runtime");
-    for (rel, contents) in mpc_codegen::vendor::RUNTIME_FILES {
+    let mut sources = Vec::new();
+    rust_files(&runtime.join("src"), &mut sources);
+    assert!(sources.len() > 10, "{sources:?}");
+    for path in sources {
+        let rel = path.strip_prefix(&runtime).unwrap();
         assert_eq!(
-            std::fs::read_to_string(runtime.join(rel)).unwrap(),
-            *contents,
-            "{rel}"
+            std::fs::read_to_string(vendored.join(rel)).ok(),
+            Some(std::fs::read_to_string(&path).unwrap()),
+            "vendor/mpc-runtime/{} is not the checkout's",
+            rel.display()
         );
     }
 
@@ -293,7 +337,8 @@ fn a_vendored_crate_builds_offline_anywhere_and_for_bare_metal() {
 #[test]
 fn a_versioned_crate_builds_against_the_packaged_runtime() {
     let version = mpc_codegen::vendor::RUNTIME_VERSION;
-    let unpacked = unpack(&target_dir().join("unpacked-versioned"));
+    let crates = scratch("versioned-crates");
+    let unpacked = unpack(&crates);
     let packed = unpacked("mpc-runtime");
     for f in [
         "Cargo.toml",
@@ -333,6 +378,7 @@ fn a_versioned_crate_builds_against_the_packaged_runtime() {
     );
     assert!(bare.contains("Compiling paper_pointmass"), "{bare}");
     let _ = std::fs::remove_dir_all(&dir);
+    let _ = std::fs::remove_dir_all(&crates);
 }
 
 /// What a user without this repository has: the library crates as `cargo package` packs
@@ -343,7 +389,8 @@ fn a_versioned_crate_builds_against_the_packaged_runtime() {
 #[test]
 fn a_fresh_project_generates_builds_and_runs_a_solver_from_the_packaged_crates() {
     let version = mpc_codegen::vendor::RUNTIME_VERSION;
-    let unpacked = unpack(&target_dir().join("unpacked-fresh"));
+    let crates = scratch("fresh-crates");
+    let unpacked = unpack(&crates);
     let dir = scratch("fresh");
     std::fs::create_dir_all(dir.join("src")).unwrap();
     std::fs::write(dir.join("pointmass.mpc"), MODEL).unwrap();
@@ -377,6 +424,7 @@ fn a_fresh_project_generates_builds_and_runs_a_solver_from_the_packaged_crates()
     );
     assert!(ran.contains("Ok ["), "{ran}");
     let _ = std::fs::remove_dir_all(&dir);
+    let _ = std::fs::remove_dir_all(&crates);
 }
 
 const FRESH_X0: [f64; 9] = [1.0, -0.5, 0.2, 0.0, 0.3, 0.0, 0.0, 0.0, 0.0];

@@ -168,21 +168,10 @@ impl Builder {
     /// # Errors
     /// Those of [`generate_module`](crate::generate_module), and [`CodegenError::Io`].
     pub fn build_ocp(&self, ocp: &Ocp<'_>) -> Result<PathBuf, CodegenError> {
-        let (module, text) = self.module_source(ocp)?;
-        self.write(&module, &text)
-    }
-
-    /// The module's name and text for a problem, as [`build_ocp`](Self::build_ocp) writes
-    /// them, without writing anything: to compare a module built earlier with what this
-    /// generator makes of the same problem.
-    ///
-    /// # Errors
-    /// Those of [`generate_module`](crate::generate_module).
-    pub fn module_source(&self, ocp: &Ocp<'_>) -> Result<(String, String), CodegenError> {
         let module = self.module.clone().unwrap_or_else(|| ocp.name.clone());
         let mut opts = self.opts.clone();
         opts.crate_name = Some(module.clone());
         let text = crate::generate_module(ocp, &module, &opts)?;
-        Ok((module, text))
+        self.write(&module, &text)
     }
 }

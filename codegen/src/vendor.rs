@@ -39,32 +39,3 @@ pub fn files() -> Vec<(PathBuf, String)> {
     );
     files
 }
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// The vendored `Cargo.toml` declares the runtime's dependencies as the workspace does.
-    #[test]
-    fn vendored_dependencies_are_the_runtimes() {
-        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-        let workspace = std::fs::read_to_string(root.join("Cargo.toml")).unwrap();
-        let runtime = std::fs::read_to_string(root.join("runtime/Cargo.toml")).unwrap();
-        let section = runtime
-            .split("\n[dependencies]\n")
-            .nth(1)
-            .and_then(|s| s.split("\n[").next())
-            .expect("runtime/Cargo.toml has [dependencies]");
-        let mut names: Vec<&str> = section
-            .lines()
-            .filter_map(|l| l.strip_suffix(".workspace = true"))
-            .collect();
-        names.sort_unstable();
-        assert_eq!(names, ["libm", "nalgebra"], "{section}");
-        for line in RUNTIME_DEPENDENCIES.lines() {
-            assert!(workspace.lines().any(|l| l == line), "{line}");
-        }
-        assert!(runtime_cargo_toml().contains(&format!("version = \"{RUNTIME_VERSION}\"")));
-        assert!(RUNTIME_FILES.iter().any(|(p, _)| *p == "src/lib.rs"));
-    }
-}

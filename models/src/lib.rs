@@ -13,8 +13,6 @@
 //!   [`quadrotor_rates_n40`] and [`quadrotor_rates_n40_f32`] (N = 40, dt = 0.025). They
 //!   are the code of the crates of the same name in the repository's `generated/`, without
 //!   their C ABI.
-//! - [`generated`]: the text of the modules the simulator flies, to compare with what the
-//!   generator makes of the model (`mpcc sim` does).
 #![no_std]
 
 mpc_runtime::include_solver!("paper_pointmass");
@@ -44,14 +42,4 @@ pub mod source {
     pub const PLANAR_QUADROTOR: &str = include_str!("../planar_quadrotor.mpc");
     /// `stiff_actuator.mpc`: a stiff actuator on the implicit integrator (example).
     pub const STIFF_ACTUATOR: &str = include_str!("../stiff_actuator.mpc");
-}
-
-/// The text of the generated modules the simulator flies, as `build.rs` wrote them.
-pub mod generated {
-    /// The module [`paper_pointmass`](crate::paper_pointmass).
-    pub const PAPER_POINTMASS: &str = include_str!(concat!(env!("OUT_DIR"), "/paper_pointmass.rs"));
-    /// The module [`quadrotor_rates`](crate::quadrotor_rates).
-    pub const QUADROTOR_RATES: &str = include_str!(concat!(env!("OUT_DIR"), "/quadrotor_rates.rs"));
-    /// The module [`quadrotor_probe`](crate::quadrotor_probe).
-    pub const QUADROTOR_PROBE: &str = include_str!(concat!(env!("OUT_DIR"), "/quadrotor_probe.rs"));
 }
